@@ -1,0 +1,11 @@
+// kdspace: search in k-dimensional space with kd-trees. The umbrella header.
+#pragma once
+
+#include "kdspace/box.hpp"
+#include "kdspace/error.hpp"
+#include "kdspace/metric.hpp"
+#include "kdspace/points/brute_force.hpp"
+#include "kdspace/points/neighbor.hpp"
+#include "kdspace/points/params.hpp"
+#include "kdspace/points/point_tree.hpp"
+#include "kdspace/version.hpp"

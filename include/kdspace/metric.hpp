@@ -1,0 +1,86 @@
+// Metrics: L2 (Euclidean), L1 (Manhattan) and Linf (Chebyshev).
+//
+// The tree never works with true distances inside: it works with an "internal" distance, a monotone
+// function of the true one that is cheap to accumulate axis by axis (the squared distance for L2, the
+// distance itself for L1 and Linf). Users only ever see true distances: radii go in through
+// to_internal() and results come out through to_distance().
+//
+// A metric is a set of static functions:
+//   term(diff)                 the contribution of one axis, from the coordinate difference
+//   accumulate(acc, term)      how contributions combine (a sum, or a maximum for Linf)
+//   replace(bound, old, new)   the bound after one axis's contribution grows from `old` to `new`
+//                              (the incremental cell distance of Arya & Mount: only one axis changes
+//                              when the search steps into a child cell)
+//   to_distance / to_internal  the monotone map between internal and true distances
+// Because combining is a function of its own (not a fixed sum), L-infinity works like the others.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+
+namespace kdspace {
+
+struct L2 {
+  static constexpr const char* name = "l2";
+  template <class T>
+  static T term(T diff) { return diff * diff; }
+  template <class T>
+  static T accumulate(T acc, T t) { return acc + t; }
+  template <class T>
+  static T replace(T bound, T old_term, T new_term) { return bound - old_term + new_term; }
+  template <class T>
+  static T to_distance(T internal) { return std::sqrt(internal); }
+  template <class T>
+  static T to_internal(T distance) { return distance * distance; }
+};
+
+struct L1 {
+  static constexpr const char* name = "l1";
+  template <class T>
+  static T term(T diff) { return std::abs(diff); }
+  template <class T>
+  static T accumulate(T acc, T t) { return acc + t; }
+  template <class T>
+  static T replace(T bound, T old_term, T new_term) { return bound - old_term + new_term; }
+  template <class T>
+  static T to_distance(T internal) { return internal; }
+  template <class T>
+  static T to_internal(T distance) { return distance; }
+};
+
+struct Linf {
+  static constexpr const char* name = "linf";
+  template <class T>
+  static T term(T diff) { return std::abs(diff); }
+  template <class T>
+  static T accumulate(T acc, T t) { return std::max(acc, t); }
+  // In a child cell the axis's contribution can only grow, so the maximum simply takes it in.
+  template <class T>
+  static T replace(T bound, T /*old_term*/, T new_term) { return std::max(bound, new_term); }
+  template <class T>
+  static T to_distance(T internal) { return internal; }
+  template <class T>
+  static T to_internal(T distance) { return distance; }
+};
+
+/// The internal distance between two points of `dim` coordinates.
+///
+/// This one function is used by the tree, by brute_force_knn and by the tests, always in the same
+/// order of operations, so "exact" can be checked bit for bit. Four independent accumulators (lane
+/// j takes axes j, j+4, ...) let the compiler keep several additions in flight.
+template <class Metric, class T>
+inline T internal_distance(const T* a, const T* b, std::size_t dim) {
+  T acc0 = 0, acc1 = 0, acc2 = 0, acc3 = 0;
+  std::size_t i = 0;
+  for (; i + 4 <= dim; i += 4) {
+    acc0 = Metric::accumulate(acc0, Metric::term(a[i] - b[i]));
+    acc1 = Metric::accumulate(acc1, Metric::term(a[i + 1] - b[i + 1]));
+    acc2 = Metric::accumulate(acc2, Metric::term(a[i + 2] - b[i + 2]));
+    acc3 = Metric::accumulate(acc3, Metric::term(a[i + 3] - b[i + 3]));
+  }
+  for (; i < dim; ++i) acc0 = Metric::accumulate(acc0, Metric::term(a[i] - b[i]));
+  return Metric::accumulate(Metric::accumulate(acc0, acc1), Metric::accumulate(acc2, acc3));
+}
+
+}  // namespace kdspace

@@ -1,0 +1,90 @@
+// Result sets: the one place that decides what a query keeps. The traversal offers every scored
+// point and prunes every cell farther than bound(); it knows nothing else about the query.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace kdspace::detail {
+
+/// A scored point: internal distance and original index.
+template <class T>
+struct Candidate {
+  T dist;
+  std::uint32_t index;
+};
+
+/// The order of results: ascending distance, ties by ascending index.
+template <class T>
+bool comes_before(const Candidate<T>& a, const Candidate<T>& b) {
+  return a.dist < b.dist || (a.dist == b.dist && a.index < b.index);
+}
+
+/// Keeps the k first candidates in (distance, index) order among those with dist <= limit.
+/// A max-heap on that order; its top is the one to evict.
+template <class T>
+class KnnResults {
+ public:
+  KnnResults(std::size_t k, T limit, std::vector<Candidate<T>>& storage) : k_(k), limit_(limit), heap_(storage) {
+    heap_.clear();
+    heap_.reserve(k);
+  }
+
+  /// The largest distance a candidate may have and still be kept (ties may still enter by index).
+  T bound() const { return heap_.size() == k_ ? heap_.front().dist : limit_; }
+
+  /// Offers a candidate; false when it was not kept.
+  bool offer(T dist, std::uint32_t index) {
+    const Candidate<T> c{dist, index};
+    if (heap_.size() < k_) {
+      if (!(dist <= limit_)) return false;
+      heap_.push_back(c);
+      std::push_heap(heap_.begin(), heap_.end(), comes_before<T>);
+      return true;
+    }
+    if (!comes_before(c, heap_.front())) return false;
+    std::pop_heap(heap_.begin(), heap_.end(), comes_before<T>);
+    heap_.back() = c;
+    std::push_heap(heap_.begin(), heap_.end(), comes_before<T>);
+    return true;
+  }
+
+  /// The kept candidates in result order.
+  std::vector<Candidate<T>>& sorted() {
+    std::sort_heap(heap_.begin(), heap_.end(), comes_before<T>);
+    return heap_;
+  }
+
+ private:
+  std::size_t k_;
+  T limit_;
+  std::vector<Candidate<T>>& heap_;
+};
+
+/// Keeps every candidate with dist <= limit.
+template <class T>
+class RangeResults {
+ public:
+  RangeResults(T limit, std::vector<Candidate<T>>& storage) : limit_(limit), found_(storage) { found_.clear(); }
+
+  T bound() const { return limit_; }
+
+  bool offer(T dist, std::uint32_t index) {
+    if (!(dist <= limit_)) return false;
+    found_.push_back({dist, index});
+    return true;
+  }
+
+  std::vector<Candidate<T>>& sorted() {
+    std::sort(found_.begin(), found_.end(), comes_before<T>);
+    return found_;
+  }
+
+ private:
+  T limit_;
+  std::vector<Candidate<T>>& found_;
+};
+
+}  // namespace kdspace::detail

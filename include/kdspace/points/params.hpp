@@ -1,0 +1,42 @@
+// Parameters of the point tree: how it is built and how an approximate query may cut corners.
+#pragma once
+
+#include <cstddef>
+#include <limits>
+
+namespace kdspace {
+
+/// Which axis a node splits.
+enum class AxisRule {
+  cycle,       ///< round-robin with depth (axis = depth mod dim), skipping axes on which the node is flat
+  max_spread,  ///< the axis along which the node's points spread the most
+};
+
+/// Where along that axis the node splits.
+enum class PositionRule {
+  median,            ///< object median (std::nth_element): balanced, depth ~ log2(n / leaf_size)
+  middle,            ///< spatial middle of the node's cell; a side may be empty
+  sliding_midpoint,  ///< middle of the cell, slid to the nearest point when one side would be empty
+};
+
+struct BuildParams {
+  AxisRule axis = AxisRule::max_spread;
+  PositionRule position = PositionRule::median;
+  /// S_minObj: a node with at most this many points becomes a leaf.
+  std::size_t leaf_size = 8;
+  /// S_maxProf: a node at this depth becomes a leaf whatever its size (the root has depth 0).
+  /// At most 256; deeper recursion is never needed and would only risk the stack.
+  std::size_t max_depth = 64;
+  /// Threads for the build; 0 = all hardware threads.
+  unsigned threads = 1;
+};
+
+struct SearchParams {
+  /// Approximation factor: the i-th returned neighbour is at most (1 + eps) times as far as the true
+  /// i-th nearest neighbour. 0 = exact.
+  double eps = 0.0;
+  /// Stop after scoring this many points (no accuracy guarantee then). Default: no limit.
+  std::size_t max_checks = std::numeric_limits<std::size_t>::max();
+};
+
+}  // namespace kdspace

@@ -1,0 +1,439 @@
+// PointTree<T, Dim, Metric>: an immutable kd-tree over points, with exact and approximate k-NN,
+// radius and box search, single or batched over threads.
+//
+// Memory: a copy of the points in leaf order (n * dim * sizeof(T)), the original index of each point
+// (4 bytes a point) and the nodes (16 bytes for float, 24 for double; about 2n / leaf_size * 1.5 of
+// them with median splits), in all about 4 + 5 bytes a point besides the copy for float at the
+// default leaf size. memory_bytes() gives the exact figure.
+//
+// Exactness: every distance is computed by internal_distance() (metric.hpp) in one fixed order, so
+// results can be checked bit for bit against brute_force_knn(). Cells are pruned only when their
+// lower bound, shrunk by a margin that covers rounding in the incremental bound, exceeds the current
+// k-th distance, so rounding never loses a neighbour. The k-NN of q are the first k points in the
+// order (distance, index): ties at the k-th distance are resolved towards the smaller index.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "kdspace/error.hpp"
+#include "kdspace/metric.hpp"
+#include "kdspace/points/detail/builder.hpp"
+#include "kdspace/points/detail/node.hpp"
+#include "kdspace/points/detail/parallel.hpp"
+#include "kdspace/points/detail/result_sets.hpp"
+#include "kdspace/points/neighbor.hpp"
+#include "kdspace/points/params.hpp"
+
+namespace kdspace {
+
+/// Dimension chosen at run time.
+inline constexpr int Dynamic = -1;
+
+namespace detail {
+template <class M, class = void>
+struct is_matrix : std::false_type {};
+template <class M>
+struct is_matrix<M, std::void_t<decltype(std::declval<const M&>().rows()), decltype(std::declval<const M&>().cols()),
+                                decltype(std::declval<const M&>()(0, 0))>> : std::true_type {};
+}  // namespace detail
+
+template <class T, int Dim = Dynamic, class Metric = L2>
+class PointTree {
+  static_assert(std::is_same_v<T, float> || std::is_same_v<T, double>, "PointTree holds float or double");
+  static_assert(Dim == Dynamic || Dim > 0, "Dim is positive or Dynamic");
+
+ public:
+  using Scalar = T;
+  using Node = detail::PointNode<T>;
+
+  /// Builds from n points of `dim` coordinates, row-major: point i is rows[i*dim .. i*dim + dim).
+  /// Throws Error for n = 0, dim = 0 (or dim != Dim), non-finite coordinates, n >= 2^31.
+  PointTree(const T* rows, std::size_t n, std::size_t dim, const BuildParams& params = {}) : dim_(dim) {
+    validate_build(rows, n, dim, params);
+    build(rows, n, params);
+  }
+
+  /// Builds from a matrix with one point per row: an Eigen matrix (either storage order) or anything
+  /// with rows(), cols() and (i, j).
+  template <class Matrix, class = std::enable_if_t<detail::is_matrix<Matrix>::value>>
+  explicit PointTree(const Matrix& points, const BuildParams& params = {})
+      : dim_(static_cast<std::size_t>(points.cols())) {
+    const std::size_t n = static_cast<std::size_t>(points.rows());
+    std::vector<T> rows(n * dim_);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t a = 0; a < dim_; ++a)
+        rows[i * dim_ + a] = static_cast<T>(points(static_cast<long>(i), static_cast<long>(a)));
+    validate_build(rows.data(), n, dim_, params);
+    build(rows.data(), n, params);
+  }
+
+  std::size_t size() const { return order_.size(); }
+  std::size_t dim() const {
+    if constexpr (Dim == Dynamic) return dim_;
+    else return static_cast<std::size_t>(Dim);
+  }
+  std::size_t depth() const { return depth_; }
+  std::size_t leaf_count() const { return leaves_; }
+  std::size_t node_count() const { return nodes_.size(); }
+  /// Bytes held: points copy + index + nodes.
+  std::size_t memory_bytes() const {
+    return points_.capacity() * sizeof(T) + order_.capacity() * sizeof(std::uint32_t) + nodes_.capacity() * sizeof(Node);
+  }
+  /// Bytes held besides the copy of the points.
+  std::size_t index_bytes() const { return memory_bytes() - points_.capacity() * sizeof(T); }
+
+  // ---- single queries (const, thread-safe) -------------------------------------------------------
+
+  /// The k nearest points to q (dim() coordinates) in ascending distance, ties by ascending index.
+  /// 1 <= k <= size(), else Error. With params.eps > 0 the i-th result is within (1 + eps) of the
+  /// true i-th distance.
+  std::vector<Neighbor<T>> knn(const T* q, std::size_t k, const SearchParams& params = {},
+                               QueryStats* stats = nullptr) const {
+    check_k(k);
+    check_search_params(params);
+    check_query(q, "query");
+    std::vector<detail::Candidate<T>> scratch;
+    QueryStats local;
+    detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
+    run(q, results, params, local);
+    return finish(results.sorted(), stats, local);
+  }
+
+  /// Every point within distance r of q (closed ball), ascending distance then index; r in the
+  /// data's units (not squared). With max_results, the max_results nearest of them.
+  std::vector<Neighbor<T>> radius(const T* q, T r, std::size_t max_results = std::numeric_limits<std::size_t>::max(),
+                                  QueryStats* stats = nullptr) const {
+    check_radius(r);
+    check_query(q, "query");
+    std::vector<detail::Candidate<T>> scratch;
+    QueryStats local;
+    radius_into(q, Metric::to_internal(r), max_results, scratch, local);
+    return finish(scratch, stats, local);
+  }
+
+  /// Indices of the points p with lo <= p <= hi on every axis (closed box), ascending.
+  std::vector<Index> box(const T* lo, const T* hi, QueryStats* stats = nullptr) const {
+    check_query(lo, "box lower corner", true);
+    check_query(hi, "box upper corner", true);
+    for (std::size_t a = 0; a < dim(); ++a)
+      if (lo[a] > hi[a])
+        throw Error("box: lower corner exceeds upper corner on axis " + std::to_string(a) + " (" +
+                    std::to_string(lo[a]) + " > " + std::to_string(hi[a]) + ")");
+    std::vector<Index> found;
+    QueryStats local;
+    local.queries = 1;
+    search_box(0, lo, hi, found, local);
+    std::sort(found.begin(), found.end());
+    if (stats) *stats += local;
+    return found;
+  }
+
+  // ---- batches: nq queries, row-major, on `threads` threads (0 = all); same answers as one thread --
+
+  NeighborLists<T> knn_batch(const T* queries, std::size_t nq, std::size_t k, const SearchParams& params = {},
+                             unsigned threads = 0, QueryStats* stats = nullptr) const {
+    check_k(k);
+    check_search_params(params);
+    check_queries(queries, nq);
+    NeighborLists<T> out;
+    out.offsets.resize(nq + 1);
+    for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
+    out.neighbors.resize(nq * k);
+    std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
+    detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
+      std::vector<detail::Candidate<T>> scratch;
+      for (std::size_t q = begin; q < end; ++q) {
+        detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
+        run(queries + q * dim(), results, params, per_worker[worker]);
+        write(results.sorted(), out.neighbors.data() + q * k);
+      }
+    });
+    sum_stats(per_worker, stats);
+    return out;
+  }
+
+  NeighborLists<T> radius_batch(const T* queries, std::size_t nq, T r,
+                                std::size_t max_results = std::numeric_limits<std::size_t>::max(),
+                                unsigned threads = 0, QueryStats* stats = nullptr) const {
+    check_radius(r);
+    check_queries(queries, nq);
+    const T limit = Metric::to_internal(r);
+    std::vector<std::vector<Neighbor<T>>> rows(nq);
+    std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
+    detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
+      std::vector<detail::Candidate<T>> scratch;
+      for (std::size_t q = begin; q < end; ++q) {
+        radius_into(queries + q * dim(), limit, max_results, scratch, per_worker[worker]);
+        rows[q].resize(scratch.size());
+        write(scratch, rows[q].data());
+      }
+    });
+    NeighborLists<T> out;
+    out.offsets.resize(nq + 1);
+    for (std::size_t q = 0; q < nq; ++q) out.offsets[q + 1] = out.offsets[q] + rows[q].size();
+    out.neighbors.reserve(out.offsets[nq]);
+    for (auto& row : rows) out.neighbors.insert(out.neighbors.end(), row.begin(), row.end());
+    sum_stats(per_worker, stats);
+    return out;
+  }
+
+  /// Nodes in depth-first order (read-only; for tools and tests).
+  const std::vector<Node>& nodes() const { return nodes_; }
+
+ private:
+  // ---- validation ---------------------------------------------------------------------------------
+
+  void validate_build(const T* rows, std::size_t n, std::size_t dim, const BuildParams& params) const {
+    if (dim == 0) throw Error("points have dimension 0");
+    if (Dim != Dynamic && dim != static_cast<std::size_t>(Dim))
+      throw Error("points have dimension " + std::to_string(dim) + ", this tree is built for dimension " +
+                  std::to_string(Dim));
+    if (n == 0) throw Error("no points: the data is empty");
+    if (n >= (std::size_t{1} << 30)) throw Error("too many points: " + std::to_string(n) + " (at most 2^30 - 1)");
+    if (rows == nullptr) throw Error("points: null pointer");
+    if (params.leaf_size == 0) throw Error("leaf_size must be at least 1");
+    if (params.max_depth > 256) throw Error("max_depth must be at most 256, got " + std::to_string(params.max_depth));
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t a = 0; a < dim; ++a)
+        if (!std::isfinite(rows[i * dim + a]))
+          throw Error("row " + std::to_string(i + 1) + ": coordinate " + std::to_string(a + 1) + " is not finite (" +
+                      std::to_string(rows[i * dim + a]) + ")");
+  }
+
+  void check_k(std::size_t k) const {
+    if (k == 0) throw Error("k must be at least 1");
+    if (k > size())
+      throw Error("k = " + std::to_string(k) + " exceeds the number of points (" + std::to_string(size()) + ")");
+  }
+
+  static void check_radius(T r) {
+    if (std::isnan(r) || r < 0) throw Error("radius must be a non-negative number, got " + std::to_string(r));
+  }
+
+  static void check_search_params(const SearchParams& p) {
+    if (!(p.eps >= 0) || std::isinf(p.eps)) throw Error("eps must be a finite number >= 0, got " + std::to_string(p.eps));
+    if (p.max_checks == 0) throw Error("max_checks must be at least 1");
+  }
+
+  // Queries must be finite; a box corner may also be infinite (an open side) but never NaN.
+  void check_query(const T* q, const std::string& what, bool allow_infinite = false) const {
+    if (q == nullptr) throw Error(what + ": null pointer");
+    for (std::size_t a = 0; a < dim(); ++a) {
+      const bool ok = allow_infinite ? !std::isnan(q[a]) : std::isfinite(q[a]);
+      if (!ok) throw Error(what + ": coordinate " + std::to_string(a + 1) + " is not finite (" + std::to_string(q[a]) + ")");
+    }
+  }
+
+  void check_queries(const T* queries, std::size_t nq) const {
+    if (nq > 0 && queries == nullptr) throw Error("queries: null pointer");
+    for (std::size_t q = 0; q < nq; ++q)
+      for (std::size_t a = 0; a < dim(); ++a)
+        if (!std::isfinite(queries[q * dim() + a]))
+          throw Error("query row " + std::to_string(q + 1) + ": coordinate " + std::to_string(a + 1) +
+                      " is not finite (" + std::to_string(queries[q * dim() + a]) + ")");
+  }
+
+  // ---- build ------------------------------------------------------------------------------------
+
+  void build(const T* rows, std::size_t n, const BuildParams& params) {
+    const std::size_t d = dim();
+    root_lo_.assign(rows, rows + d);
+    root_hi_.assign(rows, rows + d);
+    for (std::size_t i = 1; i < n; ++i)
+      for (std::size_t a = 0; a < d; ++a) {
+        root_lo_[a] = std::min(root_lo_[a], rows[i * d + a]);
+        root_hi_[a] = std::max(root_hi_[a], rows[i * d + a]);
+      }
+    detail::BuiltTree<T> built = detail::with_split_rules(params, [&](auto axis_rule, auto position_rule) {
+      using Builder = detail::Builder<T, decltype(axis_rule), decltype(position_rule)>;
+      return Builder(rows, n, d, params).build(root_lo_.data(), root_hi_.data());
+    });
+    nodes_ = std::move(built.nodes);
+    order_ = std::move(built.order);
+    depth_ = built.depth;
+    leaves_ = built.leaves;
+    points_.resize(n * d);
+    for (std::size_t i = 0; i < n; ++i) std::copy_n(rows + std::size_t{order_[i]} * d, d, points_.data() + i * d);
+    // A cell's computed lower bound may exceed the exact one by rounding (a few ulps per axis and per
+    // level); pruning against bound * prune_margin_ keeps every cell that could hold a tie.
+    prune_margin_ = T(1) - T(4) * T(d + 2 * depth_ + 8) * std::numeric_limits<T>::epsilon();
+  }
+
+  // ---- search -----------------------------------------------------------------------------------
+
+  // Per-query scratch for the per-axis contributions of the cell bound; on the stack up to 64 axes.
+  struct AxisTerms {
+    T local[64];
+    std::vector<T> heap;
+    T* data;
+    explicit AxisTerms(std::size_t d) : data(local) {
+      if (d > 64) heap.resize(d), data = heap.data();
+    }
+  };
+
+  struct Context {
+    const T* q;
+    T* axis_terms;  // contribution of each axis to the current cell bound
+    T prune_scale;  // bound * prune_scale > kept distance => prune
+    std::size_t max_checks;
+    QueryStats* stats;
+  };
+
+  template <class Results>
+  void run(const T* q, Results& results, const SearchParams& params, QueryStats& stats) const {
+    AxisTerms terms(dim());
+    T bound = 0;
+    for (std::size_t a = 0; a < dim(); ++a) {
+      const T diff = q[a] < root_lo_[a] ? root_lo_[a] - q[a] : (q[a] > root_hi_[a] ? q[a] - root_hi_[a] : T(0));
+      terms.data[a] = Metric::term(diff);
+      bound = Metric::accumulate(bound, terms.data[a]);
+    }
+    const T eps_scale = Metric::to_internal(static_cast<T>(1 + params.eps));
+    Context ctx{q, terms.data, prune_margin_ * eps_scale, params.max_checks, &stats};
+    ++stats.queries;
+    if (!(bound * ctx.prune_scale > results.bound())) search(0, bound, ctx, results);
+  }
+
+  template <class Results>
+  void search(std::uint32_t id, T bound, Context& ctx, Results& results) const {
+    const Node& node = nodes_[id];
+    ++ctx.stats->nodes_visited;
+    if (node.is_leaf()) {
+      scan_leaf(node, ctx, results);
+      return;
+    }
+    const std::uint32_t axis = node.axis();
+    const T x = ctx.q[axis];
+    const T to_left = x - node.left_max;    // > 0: q lies beyond the left subtree
+    const T to_right = node.right_min - x;  // > 0: q lies before the right subtree
+    const bool left_first = to_left <= to_right;
+    const std::uint32_t near = left_first ? id + 1 : node.right_child();
+    const std::uint32_t far = left_first ? node.right_child() : id + 1;
+    const T far_gap = left_first ? to_right : to_left;  // >= 0, as left_max <= right_min
+
+    search(near, bound, ctx, results);
+
+    const T old_term = ctx.axis_terms[axis];
+    const T new_term = Metric::term(far_gap);
+    const T far_bound = Metric::replace(bound, old_term, new_term);
+    if (far_bound * ctx.prune_scale > results.bound()) return;
+    if (ctx.stats->points_visited >= ctx.max_checks) return;
+    ctx.axis_terms[axis] = new_term;
+    search(far, far_bound, ctx, results);
+    ctx.axis_terms[axis] = old_term;
+  }
+
+  template <class Results>
+  void scan_leaf(const Node& leaf, Context& ctx, Results& results) const {
+    const std::size_t first = leaf.first(), count = leaf.count();
+    const T* p = points_.data() + first * dim();
+    if (leaf.all_identical()) {
+      // One distance serves all; the indices are ascending, so the first refusal ends the scan.
+      const T dist = internal_distance<Metric>(ctx.q, p, dim());
+      ++ctx.stats->points_visited;
+      for (std::size_t i = 0; i < count; ++i)
+        if (!results.offer(dist, order_[first + i])) break;
+      return;
+    }
+    ctx.stats->points_visited += count;
+    for (std::size_t i = 0; i < count; ++i, p += dim())
+      results.offer(internal_distance<Metric>(ctx.q, p, dim()), order_[first + i]);
+  }
+
+  void radius_into(const T* q, T limit, std::size_t max_results, std::vector<detail::Candidate<T>>& out,
+                   QueryStats& stats) const {
+    if (max_results < size()) {
+      if (max_results == 0) {
+        out.clear();
+        ++stats.queries;
+        return;
+      }
+      detail::KnnResults<T> results(max_results, limit, out);
+      run(q, results, SearchParams{}, stats);
+      results.sorted();
+    } else {
+      detail::RangeResults<T> results(limit, out);
+      run(q, results, SearchParams{}, stats);
+      results.sorted();
+    }
+  }
+
+  void search_box(std::uint32_t id, const T* lo, const T* hi, std::vector<Index>& found, QueryStats& stats) const {
+    const Node& node = nodes_[id];
+    ++stats.nodes_visited;
+    if (node.is_leaf()) {
+      const std::size_t first = node.first(), count = node.count();
+      const T* p = points_.data() + first * dim();
+      stats.points_visited += node.all_identical() ? 1 : count;
+      for (std::size_t i = 0; i < count; ++i, p += dim()) {
+        bool inside = true;
+        for (std::size_t a = 0; a < dim() && inside; ++a) inside = lo[a] <= p[a] && p[a] <= hi[a];
+        if (inside) found.push_back(order_[first + i]);
+        else if (node.all_identical()) return;
+      }
+      return;
+    }
+    const std::uint32_t axis = node.axis();
+    if (lo[axis] <= node.left_max) search_box(id + 1, lo, hi, found, stats);
+    if (hi[axis] >= node.right_min) search_box(node.right_child(), lo, hi, found, stats);
+  }
+
+  std::vector<Neighbor<T>> finish(const std::vector<detail::Candidate<T>>& sorted, QueryStats* stats,
+                                  const QueryStats& local) const {
+    std::vector<Neighbor<T>> out(sorted.size());
+    write(sorted, out.data());
+    if (stats) *stats += local;
+    return out;
+  }
+
+  // Converts to true distances. Two internal distances may map to one true distance (sqrt rounds),
+  // so the (distance, index) order is restored where that happened.
+  static void write(const std::vector<detail::Candidate<T>>& sorted, Neighbor<T>* out) {
+    Neighbor<T>* first = out;
+    for (const auto& c : sorted) *out++ = Neighbor<T>{c.index, Metric::to_distance(c.dist)};
+    auto in_order = [](const Neighbor<T>& a, const Neighbor<T>& b) {
+      return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
+    };
+    if (!std::is_sorted(first, out, in_order)) std::sort(first, out, in_order);
+  }
+
+  static void sum_stats(const std::vector<QueryStats>& per_worker, QueryStats* stats) {
+    if (!stats) return;
+    for (const auto& s : per_worker) *stats += s;
+  }
+
+  std::size_t dim_;
+  std::vector<T> points_;             // leaf-ordered copy, row-major
+  std::vector<std::uint32_t> order_;  // original index of each leaf-ordered point
+  std::vector<Node> nodes_;           // depth first; nodes_[0] is the root
+  std::vector<T> root_lo_, root_hi_;  // bounds of all points
+  std::size_t depth_ = 0;
+  std::size_t leaves_ = 0;
+  T prune_margin_ = 1;
+};
+
+}  // namespace kdspace
+
+// The common instantiations are compiled once in the library (lib/points/instances.cpp).
+namespace kdspace {
+#define KDSPACE_POINT_TREE_INSTANCES(PREFIX)   \
+  PREFIX class PointTree<float, Dynamic, L2>;  \
+  PREFIX class PointTree<float, Dynamic, L1>;  \
+  PREFIX class PointTree<float, Dynamic, Linf>; \
+  PREFIX class PointTree<double, Dynamic, L2>; \
+  PREFIX class PointTree<double, Dynamic, L1>; \
+  PREFIX class PointTree<double, Dynamic, Linf>; \
+  PREFIX class PointTree<float, 2, L2>;        \
+  PREFIX class PointTree<float, 3, L2>;        \
+  PREFIX class PointTree<double, 2, L2>;       \
+  PREFIX class PointTree<double, 3, L2>;
+KDSPACE_POINT_TREE_INSTANCES(extern template)
+}  // namespace kdspace
