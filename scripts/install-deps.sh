@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installs the Debian packages kdspace needs to build, test and benchmark.
+# As root it runs apt-get; as another user it prints the command to run.
+set -euo pipefail
+
+packages=(
+  build-essential cmake ninja-build pkg-config git python3  # toolchain
+  libpng-dev                                                 # kdspace render
+  catch2 libeigen3-dev                                       # tests
+  libflann-dev liblz4-dev                                    # FLANN: validation tests and benchmarks
+  libnanoflann-dev libembree-dev                             # benchmark peers
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all packages present"
+  exit 0
+fi
+if [ "$(id -u)" -ne 0 ]; then
+  echo "install-deps: missing packages; run as root:" >&2
+  echo "  apt-get update && apt-get install -y ${missing[*]}" >&2
+  exit 1
+fi
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+apt-get install -y -qq --no-install-recommends "${missing[@]}"
