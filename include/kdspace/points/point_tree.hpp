@@ -257,11 +257,11 @@ class PointTree {
       return Builder(rows, n, d, params).build(root_lo_.data(), root_hi_.data());
     });
     nodes_ = std::move(built.nodes);
+    points_ = std::move(built.points);
     order_ = std::move(built.order);
     depth_ = built.depth;
     leaves_ = built.leaves;
-    points_.resize(n * d);
-    for (std::size_t i = 0; i < n; ++i) std::copy_n(rows + std::size_t{order_[i]} * d, d, points_.data() + i * d);
+    nodes_.shrink_to_fit();
     // A cell's computed lower bound may exceed the exact one by rounding (a few ulps per axis and per
     // level); pruning against bound * prune_margin_ keeps every cell that could hold a tie.
     prune_margin_ = T(1) - T(4) * T(d + 2 * depth_ + 8) * std::numeric_limits<T>::epsilon();

@@ -7,18 +7,20 @@
 #include <cstddef>
 #include <cstdint>
 #include <utility>
+#include <vector>
 
 #include "kdspace/points/params.hpp"
 
 namespace kdspace::detail {
 
-/// What a rule may look at: the node's points (indices into row-major coordinates), the bounds of
-/// those points and the node's cell, all per axis.
+/// What a rule may look at: the node's points, the bounds of those points and the node's cell, all
+/// per axis. The rule reorders the node-local indices [first, last) (0 .. count-1 into `coords`); the
+/// builder then moves the rows themselves.
 template <class T>
 struct SplitInput {
-  const T* coords;      ///< row-major coordinates of all points
+  const T* coords;  ///< row-major coordinates of the node's points
   std::size_t dim;
-  std::uint32_t* first;  ///< the node's point indices [first, last), reordered by the position rule
+  std::uint32_t* first;  ///< node-local indices [first, last), reordered by the position rule
   std::uint32_t* last;
   const T* point_lo;  ///< bounds of the node's points
   const T* point_hi;
@@ -66,14 +68,23 @@ struct MaxSpreadAxis {
 // ---- position rules --------------------------------------------------------------------------
 
 /// Object median: std::nth_element (introselect), so sorted or gridded input never goes quadratic.
+/// The selection runs on a contiguous copy of (coordinate, index) pairs, not on coordinates read
+/// through the index array at every comparison.
 struct MedianPosition {
   template <class T>
   static Partition<T> split(const SplitInput<T>& in, std::size_t axis) {
+    struct Keyed {
+      T key;
+      std::uint32_t index;
+    };
+    thread_local std::vector<Keyed> keyed;
     const std::size_t n = static_cast<std::size_t>(in.last - in.first);
-    std::uint32_t* mid = in.first + n / 2;
-    std::nth_element(in.first, mid, in.last,
-                     [&](std::uint32_t a, std::uint32_t b) { return in.coord(a, axis) < in.coord(b, axis); });
-    return {n / 2, in.coord(*mid, axis)};
+    keyed.resize(n);
+    for (std::size_t i = 0; i < n; ++i) keyed[i] = {in.coord(in.first[i], axis), in.first[i]};
+    auto mid = keyed.begin() + static_cast<std::ptrdiff_t>(n / 2);
+    std::nth_element(keyed.begin(), mid, keyed.end(), [](const Keyed& a, const Keyed& b) { return a.key < b.key; });
+    for (std::size_t i = 0; i < n; ++i) in.first[i] = keyed[i].index;
+    return {n / 2, mid->key};
   }
 };
 
