@@ -8,4 +8,6 @@
 #include "kdspace/points/neighbor.hpp"
 #include "kdspace/points/params.hpp"
 #include "kdspace/points/point_tree.hpp"
+#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/rays/ray.hpp"
 #include "kdspace/version.hpp"

@@ -38,7 +38,8 @@ struct SearchParams {
   /// Approximation factor: the i-th returned neighbour is at most (1 + eps) times as far as the true
   /// i-th nearest neighbour. 0 = exact.
   double eps = 0.0;
-  /// Stop after scoring this many points (no accuracy guarantee then). Default: no limit.
+  /// Stop looking further once this many points are scored and k candidates are in hand (no accuracy
+  /// guarantee then; the answer always has k entries). Counted per query. Default: no limit.
   std::size_t max_checks = std::numeric_limits<std::size_t>::max();
 };
 

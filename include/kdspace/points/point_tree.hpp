@@ -10,7 +10,9 @@
 // results can be checked bit for bit against brute_force_knn(). Cells are pruned only when their
 // lower bound, shrunk by a margin that covers rounding in the incremental bound, exceeds the current
 // k-th distance, so rounding never loses a neighbour. The k-NN of q are the first k points in the
-// order (distance, index): ties at the k-th distance are resolved towards the smaller index.
+// order (internal distance, index): ties, at the k-th place too, go to the smaller index. For L2 the
+// internal distance is the squared one, so two points whose squared distances differ by an ulp but
+// share one rounded square root keep their squared order (as in brute_force_knn).
 #pragma once
 
 #include <algorithm>
@@ -125,7 +127,7 @@ class PointTree {
     check_query(hi, "box upper corner", true);
     for (std::size_t a = 0; a < dim(); ++a)
       if (lo[a] > hi[a])
-        throw Error("box: lower corner exceeds upper corner on axis " + std::to_string(a) + " (" +
+        throw Error("box: lower corner exceeds upper corner at coordinate " + std::to_string(a + 1) + " (" +
                     std::to_string(lo[a]) + " > " + std::to_string(hi[a]) + ")");
     std::vector<Index> found;
     QueryStats local;
@@ -283,7 +285,7 @@ class PointTree {
     const T* q;
     T* axis_terms;  // contribution of each axis to the current cell bound
     T prune_scale;  // bound * prune_scale > kept distance => prune
-    std::size_t max_checks;
+    std::uint64_t checks_end;  // stop looking further once stats->points_visited reaches this
     QueryStats* stats;
   };
 
@@ -297,7 +299,10 @@ class PointTree {
       bound = Metric::accumulate(bound, terms.data[a]);
     }
     const T eps_scale = Metric::to_internal(static_cast<T>(1 + params.eps));
-    Context ctx{q, terms.data, prune_margin_ * eps_scale, params.max_checks, &stats};
+    const std::uint64_t checks_end = params.max_checks > UINT64_MAX - stats.points_visited
+                                         ? UINT64_MAX
+                                         : stats.points_visited + params.max_checks;
+    Context ctx{q, terms.data, prune_margin_ * eps_scale, checks_end, &stats};
     ++stats.queries;
     if (!(bound * ctx.prune_scale > results.bound())) search(0, bound, ctx, results);
   }
@@ -325,7 +330,8 @@ class PointTree {
     const T new_term = Metric::term(far_gap);
     const T far_bound = Metric::replace(bound, old_term, new_term);
     if (far_bound * ctx.prune_scale > results.bound()) return;
-    if (ctx.stats->points_visited >= ctx.max_checks) return;
+    // The check budget ends the search only once k candidates are in hand.
+    if (ctx.stats->points_visited >= ctx.checks_end && results.full()) return;
     ctx.axis_terms[axis] = new_term;
     search(far, far_bound, ctx, results);
     ctx.axis_terms[axis] = old_term;
@@ -394,15 +400,9 @@ class PointTree {
     return out;
   }
 
-  // Converts to true distances. Two internal distances may map to one true distance (sqrt rounds),
-  // so the (distance, index) order is restored where that happened.
+  // Converts to true distances, keeping the order of the internal ones (see the top of this file).
   static void write(const std::vector<detail::Candidate<T>>& sorted, Neighbor<T>* out) {
-    Neighbor<T>* first = out;
     for (const auto& c : sorted) *out++ = Neighbor<T>{c.index, Metric::to_distance(c.dist)};
-    auto in_order = [](const Neighbor<T>& a, const Neighbor<T>& b) {
-      return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
-    };
-    if (!std::is_sorted(first, out, in_order)) std::sort(first, out, in_order);
   }
 
   static void sum_stats(const std::vector<QueryStats>& per_worker, QueryStats* stats) {

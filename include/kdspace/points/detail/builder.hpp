@@ -73,6 +73,13 @@ class Builder {
                    std::vector<T>& cell_hi, std::size_t parallel_levels) const {
     out.depth = std::max(out.depth, depth);
     const std::size_t count = end - begin;
+    if (count == 0) {  // the empty side of a `middle` split
+      PointNode<T> leaf{};
+      leaf.link = static_cast<std::uint32_t>(begin);
+      leaf.info = PointNode<T>::leaf_bit;
+      out.nodes.push_back(leaf);
+      return;
+    }
     std::vector<T> lo(row(begin), row(begin) + dim_), hi(row(begin), row(begin) + dim_);
     for (std::size_t i = begin + 1; i < end; ++i) {
       const T* p = row(i);

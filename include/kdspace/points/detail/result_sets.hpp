@@ -35,6 +35,9 @@ class KnnResults {
   /// The largest distance a candidate may have and still be kept (ties may still enter by index).
   T bound() const { return heap_.size() == k_ ? heap_.front().dist : limit_; }
 
+  /// Whether k candidates are kept.
+  bool full() const { return heap_.size() == k_; }
+
   /// Offers a candidate; false when it was not kept.
   bool offer(T dist, std::uint32_t index) {
     const Candidate<T> c{dist, index};
@@ -70,6 +73,9 @@ class RangeResults {
   RangeResults(T limit, std::vector<Candidate<T>>& storage) : limit_(limit), found_(storage) { found_.clear(); }
 
   T bound() const { return limit_; }
+
+  /// A range query keeps looking until the whole ball is covered.
+  bool full() const { return false; }
 
   bool offer(T dist, std::uint32_t index) {
     if (!(dist <= limit_)) return false;

@@ -1,0 +1,217 @@
+// BoxTree: a kd-tree over axis-aligned 3-D boxes for ray shooting (closest hit, any hit).
+//
+// Builds (one tree format for all):
+//   median     axis cycling with depth; plane at the spatial middle of the cell or at the median box;
+//              stops at leaf_size boxes (S_minObj) or max_depth (S_maxProf).
+//   sah        Surface Area Heuristic; candidate planes sorted again at every node: O(N log^2 N).
+//   sah_nlogn  the same heuristic with the events sorted once and kept sorted while splitting
+//              (Wald & Havran 2006, "On building fast kd-trees for ray tracing, and on doing that in
+//              O(N log N)"): O(N log N). Builds exactly the tree `sah` builds.
+// Both SAH builds use "perfect splits" (a box straddling the cell is clipped to it before its faces
+// become candidate planes) and planar events (a flat box lying in the plane goes to the cheaper side).
+//
+// Queries are const and thread-safe. A ray hits a closed, solid box: touching a face, an edge or a
+// corner is a hit, and a ray starting inside a box hits it at t_min. The closest hit is the one with
+// the smallest t, then the smallest box index. Ray parameters are computed in double precision
+// (t = (face - origin) / direction, with the reciprocal of the direction precomputed); the reported t
+// is that value rounded to float (a hit farther than the float range reports FLT_MAX).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "kdspace/box.hpp"
+#include "kdspace/rays/ray.hpp"
+
+namespace kdspace {
+
+enum class BoxBuildMethod { median, sah, sah_nlogn };
+
+/// Where the median build puts its plane along the cycled axis.
+enum class MedianPosition {
+  middle,         ///< the spatial middle of the cell
+  object_median,  ///< the lower face of the median box (boxes ordered by lower face, clipped to the cell)
+};
+
+/// P(sub | V), the chance that a ray through cell V also passes through its part `sub`.
+enum class HitProbability {
+  surface_area,  ///< SA(sub) / SA(V): exact for uniformly distributed lines (Crofton / MacDonald-Booth)
+  volume,        ///< Vol(sub) / Vol(V): a cruder model, offered for comparison
+};
+
+/// The deepest tree any build makes; the traversal stack is sized for it.
+inline constexpr std::size_t max_box_tree_depth = 64;
+
+struct BoxBuildParams {
+  BoxBuildMethod method = BoxBuildMethod::sah_nlogn;
+  /// Median build only.
+  MedianPosition median_position = MedianPosition::middle;
+
+  // SAH cost of splitting cell V at plane p (Wald & Havran 2006, with their planar events):
+  //   C(p) = lambda(p) * (K_t + K_i * (P(left|V) * |O_left| + P(right|V) * |O_right|))
+  // with lambda(p) = 1 - empty_bonus when one side holds no box, else 1. A node becomes a leaf when
+  // no plane costs less than K_i * |O|, the cost of testing all its boxes. Only the ratio K_i / K_t
+  // and empty_bonus shape the tree.
+  // The defaults come from measurement (bench/rays_scaling.cpp --tune: 1e5 uniform and clustered
+  // boxes, 3e3 clustered boxes; random rays and primary rays): trace speed is flat for K_i / K_t
+  // between 0.5 and 1; K_i / K_t = 1.5 with empty_bonus 0.2 traced 10-30% slower, 3 slower still.
+  // An empty bonus above 0.1 mostly adds empty leaves on such scenes (0.5: up to 30% slower). A node
+  // step (a dependent load and an unpredictable branch) costs more than the slab test of a box
+  // stored in its leaf.
+
+  /// Cost of one traversal step (an inner node).
+  float K_t = 1.0f;
+  /// Cost of one ray-box test.
+  float K_i = 0.75f;
+  /// Reward for cutting off empty space, in [0, 1) (W&H use 0.2: their lambda = 80%). Small by
+  /// default: it pays in sparse scenes, and costs little in dense ones.
+  float empty_bonus = 0.1f;
+
+  /// S_minObj for the median build: a node with at most this many boxes becomes a leaf. The SAH
+  /// builds stop by cost instead and ignore it.
+  std::size_t leaf_size = 4;
+  /// S_maxProf: nodes at this depth become leaves (the root has depth 0). 0 = automatic:
+  /// round(8 + 1.3 log2 N), the rule of pbrt. At most max_box_tree_depth.
+  std::size_t max_depth = 0;
+  HitProbability probability = HitProbability::surface_area;
+  /// The leaves together hold at most this many box references per box (>= 1). Each node gets a
+  /// share of this budget (the root all of it; a split divides its node's share between the
+  /// children in proportion to their boxes) and a split that would exceed the share is not made.
+  /// Well spread scenes stay far below it (SAH trees: 1.5 to 5 references per box); boxes that
+  /// overlap everywhere would otherwise be copied into both children at every level, 2^depth times.
+  float max_references_per_box = 16;
+  /// Threads for the build; 0 = all hardware threads. The tree does not depend on it.
+  unsigned threads = 1;
+};
+
+/// A node of the tree: 8 bytes. Nodes are stored depth first; an inner node's left child is the
+/// next node and its right child is at right_child(). A leaf holds the box indices
+/// references()[first(), first() + count()), ascending.
+struct BoxNode {
+  static constexpr std::uint32_t leaf_tag = 3;
+
+  std::uint32_t word = 0;  ///< inner: the bits of the split position (float); leaf: first reference
+  std::uint32_t info = 0;  ///< bits 0-1: axis 0..2, or 3 for a leaf; bits 2-31: right child or count
+
+  static BoxNode inner(int axis, float split, std::uint32_t right_child) {
+    BoxNode n;
+    std::memcpy(&n.word, &split, sizeof split);
+    n.info = static_cast<std::uint32_t>(axis) | (right_child << 2);
+    return n;
+  }
+  static BoxNode leaf(std::uint32_t first, std::uint32_t count) {
+    BoxNode n;
+    n.word = first;
+    n.info = leaf_tag | (count << 2);
+    return n;
+  }
+
+  bool is_leaf() const { return (info & 3u) == leaf_tag; }
+  int axis() const { return static_cast<int>(info & 3u); }
+  float split() const {
+    float s;
+    std::memcpy(&s, &word, sizeof s);
+    return s;
+  }
+  std::uint32_t right_child() const { return info >> 2; }
+  std::uint32_t first() const { return word; }
+  std::uint32_t count() const { return info >> 2; }
+
+  friend bool operator==(const BoxNode& a, const BoxNode& b) { return a.word == b.word && a.info == b.info; }
+  friend bool operator!=(const BoxNode& a, const BoxNode& b) { return !(a == b); }
+};
+
+/// What a build made, and what it took.
+struct BoxTreeStats {
+  std::size_t boxes = 0;
+  std::size_t nodes = 0;
+  std::size_t leaves = 0;
+  std::size_t empty_leaves = 0;
+  std::size_t depth = 0;          ///< of the deepest leaf (a root leaf: 0)
+  std::size_t max_depth = 0;      ///< the cap the build ran with
+  std::size_t references = 0;     ///< box entries over all leaves
+  std::size_t max_leaf_size = 0;  ///< boxes in the fullest leaf
+  double references_per_box = 0;  ///< references / boxes: how often straddling boxes were duplicated
+  /// Expected cost of a ray through the scene bounds, the SAH cost of the tree (W&H 2006):
+  /// sum over inner nodes of K_t * P(node) + sum over leaves of K_i * |boxes| * P(leaf),
+  /// P(cell) = SA(cell) / SA(scene bounds). Always by surface area, whatever `probability` the
+  /// build used, so that trees built either way can be compared.
+  double sah_cost = 0;
+  double build_seconds = 0;
+};
+
+class BoxTree {
+ public:
+  /// Builds over boxes[0 .. n); box i keeps index i in the answers. n = 0 gives a tree that every ray
+  /// misses. Throws Error for a box that is not finite or has min > max ("box 17: min x 3 > max x 1",
+  /// 1-based), for n >= 2^30, and for parameters out of range.
+  BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params = {});
+  explicit BoxTree(const std::vector<Box3f>& boxes, const BoxBuildParams& params = {});
+
+  std::size_t size() const { return boxes_.size(); }
+  const Box3f& box(std::size_t i) const { return boxes_[i]; }
+  /// The union of all boxes (the root cell); lo > hi on every axis when the tree is empty.
+  const Box3f& bounds() const { return bounds_; }
+  const BoxBuildParams& params() const { return params_; }
+  const BoxTreeStats& stats() const { return stats_; }
+  std::size_t depth() const { return stats_.depth; }
+  std::size_t leaf_count() const { return stats_.leaves; }
+  std::size_t node_count() const { return nodes_.size(); }
+  const std::vector<BoxNode>& nodes() const { return nodes_; }
+  const std::vector<std::uint32_t>& references() const { return references_; }
+  /// Bytes held: the boxes (24 each), the nodes (8 each) and per reference its index (4) and a copy of
+  /// its box (24), kept in leaf order so that a leaf's boxes are tested without an indirection.
+  std::size_t memory_bytes() const {
+    return boxes_.capacity() * sizeof(Box3f) + nodes_.capacity() * sizeof(BoxNode) +
+           references_.capacity() * sizeof(std::uint32_t) + leaf_boxes_.capacity() * sizeof(Box3f);
+  }
+
+  // ---- single rays (const, thread-safe) ----------------------------------------------------------
+
+  /// The first box along the ray with t in [t_min, t_max], ties by smallest index; Hit{} (box -1) when
+  /// none. Throws Error for an unusable ray (ray_problem), a non-finite t_min, a NaN t_max or
+  /// t_min > t_max.
+  Hit closest_hit(const Ray& ray, float t_min = 0, float t_max = std::numeric_limits<float>::infinity(),
+                  RayStats* stats = nullptr) const;
+
+  /// Some box hit with t in [t_min, t_max] (the first the traversal meets, not necessarily the
+  /// closest), or Hit{} when none: the query for shadow rays. The same ray always gives the same box.
+  Hit any_hit(const Ray& ray, float t_min = 0, float t_max = std::numeric_limits<float>::infinity(),
+              RayStats* stats = nullptr) const;
+
+  // ---- batches over [0, inf), on `threads` threads (0 = all); the same answers as one thread -----
+
+  /// Throws Error naming the first unusable ray, 1-based ("ray 12: direction is zero"), before tracing.
+  std::vector<Hit> closest_hit_batch(const Ray* rays, std::size_t n, unsigned threads = 1,
+                                     RayStats* stats = nullptr) const;
+  std::vector<Hit> closest_hit_batch(const std::vector<Ray>& rays, unsigned threads = 1,
+                                     RayStats* stats = nullptr) const {
+    return closest_hit_batch(rays.data(), rays.size(), threads, stats);
+  }
+  std::vector<Hit> any_hit_batch(const Ray* rays, std::size_t n, unsigned threads = 1,
+                                 RayStats* stats = nullptr) const;
+  std::vector<Hit> any_hit_batch(const std::vector<Ray>& rays, unsigned threads = 1,
+                                 RayStats* stats = nullptr) const {
+    return any_hit_batch(rays.data(), rays.size(), threads, stats);
+  }
+
+ private:
+  template <bool AnyHit>
+  Hit trace(const Ray& ray, double t_min, double t_max, RayStats& stats) const;
+  template <bool AnyHit>
+  std::vector<Hit> trace_batch(const Ray* rays, std::size_t n, unsigned threads, RayStats* stats) const;
+  void compute_stats();
+
+  std::vector<Box3f> boxes_;
+  Box3f bounds_;
+  BoxBuildParams params_;
+  std::vector<BoxNode> nodes_;
+  std::vector<std::uint32_t> references_;
+  std::vector<Box3f> leaf_boxes_;  ///< leaf_boxes_[r] = boxes_[references_[r]]: a leaf's boxes side by side
+  BoxTreeStats stats_;
+};
+
+}  // namespace kdspace

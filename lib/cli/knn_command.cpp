@@ -1,0 +1,307 @@
+// `kdspace knn` and `kdspace radius`: read a base and a query file, build a PointTree, search, write
+// the ids (and distances) of the results. Both commands share one implementation; they differ only
+// in their options and in the batch query they run.
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "guard.hpp"
+#include "json.hpp"
+#include "kdspace/error.hpp"
+#include "kdspace/io/vectors.hpp"
+#include "kdspace/metric.hpp"
+#include "kdspace/points/detail/parallel.hpp"
+#include "kdspace/points/point_tree.hpp"
+#include "options.hpp"
+#include "progress.hpp"
+
+namespace kdspace::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+enum class Mode { knn, radius };
+
+const char* const knn_usage =
+    R"(usage: kdspace knn --base FILE --query FILE -k K --out IDS.ivecs [--distances D.fvecs]
+                   [build options] [--eps E] [--threads T] [--stats]
+Finds the K nearest base points of every query point.
+
+  -k K                 a whole number >= 1; -k 0 is a usage error (exit 2), K above the number of
+                       base points an error (exit 1), never silently shortened
+  --eps E              approximate: the i-th result within (1+E) of the true i-th (default 0: exact)
+  --forest, --checks, --recall: not available yet
+)";
+
+const char* const radius_usage =
+    R"(usage: kdspace radius --base FILE --query FILE -r R --out IDS.ivecs [--distances D.fvecs]
+                      [--max-results M] [build options] [--threads T] [--stats]
+Finds every base point within distance R of each query point (closed ball).
+
+  -r R                 a finite number >= 0 in the data's units (not squared); negative or NaN is a
+                       usage error (exit 2); the rows of IDS differ in length
+  --max-results M      keep only the M nearest within R (M >= 1)
+)";
+
+const char* const shared_usage = R"(  --base FILE          the points searched
+  --query FILE         the query points, of the same dimension
+                       Files: .fvecs .ivecs .bvecs .csv (optional header line) .npy, chosen by extension.
+                       A .csv or float64 .npy base is searched in double precision, any other in float.
+  --out IDS.ivecs      one row per query: 0-based indices of base points, nearest first, equal
+                       distances by smaller index
+  --distances D.fvecs  the true distances of those points (Euclidean for l2, not squared)
+  --threads T          threads for the build and the queries; 0 (default) = all hardware threads
+  --stats              one JSON object on stdout: build_s, query_s, queries_per_s, threads, depth,
+                       leaves, nodes_visited_per_query, points_visited_per_query, points, dim,
+                       queries, k or radius, metric, index_bytes (times without file I/O)
+build options:
+  --axis cycle|spread               split axis (default spread: the axis of largest spread)
+  --position median|middle|sliding  split position (default median)
+  --leaf N                          at most N points a leaf (default 16)
+  --max-depth D                     0..256 (default 64)
+  --metric l2|l1|linf               (default l2)
+Exit codes: 0 success, 2 usage error, 1 bad data or I/O error.
+)";
+
+struct SearchJob {
+  Mode mode = Mode::knn;
+  std::string base, query, out, distances;
+  BuildParams build;
+  std::string metric = "l2";
+  std::size_t k = 0;
+  double radius = 0;
+  std::size_t max_results = std::numeric_limits<std::size_t>::max();
+  double eps = 0;
+  unsigned threads = 0;
+  bool stats = false;
+};
+
+std::vector<OptionSpec> option_specs(Mode mode) {
+  std::vector<OptionSpec> specs = {{"--base"},   {"--query"},    {"--out"},         {"--distances"},
+                                   {"--axis"},   {"--position"}, {"--leaf"},        {"--max-depth"},
+                                   {"--metric"}, {"--threads"},  {"--stats", false}};
+  if (mode == Mode::knn) {
+    specs.push_back({"-k"});
+    specs.push_back({"--eps"});
+    for (const char* later : {"--forest", "--checks", "--recall"})
+      specs.push_back({later, true, "not available yet"});
+  } else {
+    specs.push_back({"-r"});
+    specs.push_back({"--max-results"});
+  }
+  return specs;
+}
+
+SearchJob parse_job(Mode mode, const std::vector<std::string>& args) {
+  const Options o(args, option_specs(mode));
+  constexpr std::size_t no_limit = std::numeric_limits<std::size_t>::max();
+  SearchJob job;
+  job.mode = mode;
+  job.base = o.required("--base");
+  job.query = o.required("--query");
+  if (mode == Mode::knn) {
+    if (!o.has("-k")) throw UsageError("missing option -k");
+    job.k = o.count("-k", 0, 1, no_limit);
+    job.eps = o.number("--eps", 0.0, 0.0, std::numeric_limits<double>::infinity());
+  } else {
+    if (!o.has("-r")) throw UsageError("missing option -r");
+    job.radius = o.number("-r", 0.0, 0.0, std::numeric_limits<double>::infinity());
+    job.max_results = o.count("--max-results", no_limit, 1, no_limit);
+  }
+  job.out = o.required("--out");
+  require_extension("--out", job.out, ".ivecs");
+  job.distances = o.text("--distances");
+  if (!job.distances.empty()) require_extension("--distances", job.distances, ".fvecs");
+
+  const BuildParams defaults;
+  job.build.axis =
+      o.choice("--axis", "spread", {"cycle", "spread"}) == "cycle" ? AxisRule::cycle : AxisRule::max_spread;
+  const std::string position = o.choice("--position", "median", {"median", "middle", "sliding"});
+  job.build.position = position == "middle"    ? PositionRule::middle
+                       : position == "sliding" ? PositionRule::sliding_midpoint
+                                               : PositionRule::median;
+  job.build.leaf_size = o.count("--leaf", defaults.leaf_size, 1, no_limit);
+  job.build.max_depth = o.count("--max-depth", defaults.max_depth, 0, 256);
+  job.metric = o.choice("--metric", "l2", {"l2", "l1", "linf"});
+  job.threads = static_cast<unsigned>(o.count("--threads", 0, 0, 4096));
+  job.build.threads = job.threads;
+  job.stats = o.has("--stats");
+  return job;
+}
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// A non-negative value as T; beyond float's range it becomes infinity (a plain cast would be
+// undefined behaviour). Used for distances written to .fvecs and for the radius of a float tree.
+template <class T, class From>
+T narrow(From v) {
+  if (sizeof(T) < sizeof(From) && v > static_cast<From>(std::numeric_limits<T>::max()))
+    return std::numeric_limits<T>::infinity();
+  return static_cast<T>(v);
+}
+
+template <class T>
+io::Matrix<T> read_with_progress(const std::string& path) {
+  Progress progress("reading " + path);
+  return io::read_points<T>(path, progress.callback());
+}
+
+bool starts_with(const std::string& s, const std::string& prefix) {
+  return s.compare(0, prefix.size(), prefix) == 0;
+}
+
+template <class T, class Metric>
+PointTree<T, Dynamic, Metric> build_tree(const io::Matrix<T>& base, const SearchJob& job) {
+  try {
+    return PointTree<T, Dynamic, Metric>(base.data.data(), base.rows, base.cols, job.build);
+  } catch (const Error& e) {
+    // The tree speaks of "row R" of its input; that input is the base file.
+    const std::string what = e.what();
+    throw Error(starts_with(what, job.base + ":") ? what : job.base + ": " + what);
+  }
+}
+
+template <class T, class Metric>
+NeighborLists<T> search(const PointTree<T, Dynamic, Metric>& tree, const io::Matrix<T>& queries,
+                        const SearchJob& job, QueryStats& stats) {
+  try {
+    if (job.mode == Mode::knn) {
+      SearchParams params;
+      params.eps = job.eps;
+      return tree.knn_batch(queries.data.data(), queries.rows, job.k, params, job.threads, &stats);
+    }
+    return tree.radius_batch(queries.data.data(), queries.rows, narrow<T>(job.radius), job.max_results,
+                             job.threads, &stats);
+  } catch (const Error& e) {
+    // "query row R: ..." from the tree becomes "QUERYFILE: row R: ...".
+    const std::string what = e.what();
+    const std::string prefix = "query row ";
+    throw Error(starts_with(what, prefix) ? job.query + ": row " + what.substr(prefix.size()) : what);
+  }
+}
+
+template <class T>
+void write_results(const NeighborLists<T>& found, const SearchJob& job) {
+  io::RaggedRows<std::int32_t> ids;
+  ids.offsets = found.offsets;
+  ids.values.reserve(found.neighbors.size());
+  for (const Neighbor<T>& nb : found.neighbors) ids.values.push_back(static_cast<std::int32_t>(nb.index));
+  io::write_ivecs(job.out, ids);
+  if (job.distances.empty()) return;
+  io::RaggedRows<float> dists;
+  dists.offsets = found.offsets;
+  dists.values.reserve(found.neighbors.size());
+  for (const Neighbor<T>& nb : found.neighbors) dists.values.push_back(narrow<float>(nb.distance));
+  io::write_fvecs(job.distances, dists);
+}
+
+template <class T, class Metric>
+int run_search(const SearchJob& job) {
+  io::Matrix<T> base = read_with_progress<T>(job.base);
+  const io::Matrix<T> queries = read_with_progress<T>(job.query);
+  if (queries.cols != base.cols)
+    throw Error(job.query + ": dimension " + std::to_string(queries.cols) + " does not match the base (" +
+                job.base + ": dimension " + std::to_string(base.cols) + ")");
+  if (job.mode == Mode::knn && job.k > base.rows)
+    throw Error("k = " + std::to_string(job.k) + " exceeds the number of base points (" + job.base + " has " +
+                std::to_string(base.rows) + ")");
+
+  Progress build_progress("building the tree", Progress::Kind::elapsed);
+  Clock::time_point start = Clock::now();
+  const PointTree<T, Dynamic, Metric> tree = build_tree<T, Metric>(base, job);
+  const double build_s = seconds_since(start);
+  build_progress.finish();
+  const std::size_t points = base.rows;
+  base = {};  // the tree holds its own copy
+
+  QueryStats stats;
+  Progress search_progress("searching", Progress::Kind::elapsed);
+  start = Clock::now();
+  const NeighborLists<T> found = search(tree, queries, job, stats);
+  const double query_s = seconds_since(start);
+  search_progress.finish();
+
+  write_results(found, job);
+
+  if (job.stats) {
+    const double nq = static_cast<double>(queries.rows);
+    JsonObject json;
+    json.add("command", job.mode == Mode::knn ? "knn" : "radius")
+        .add("points", std::uint64_t{points})
+        .add("dim", std::uint64_t{tree.dim()})
+        .add("queries", std::uint64_t{queries.rows});
+    if (job.mode == Mode::knn) {
+      json.add("k", std::uint64_t{job.k}).add("eps", job.eps);
+    } else {
+      json.add("radius", job.radius).add("results", std::uint64_t{found.neighbors.size()});
+      if (job.max_results != std::numeric_limits<std::size_t>::max())
+        json.add("max_results", std::uint64_t{job.max_results});
+    }
+    json.add("metric", Metric::name)
+        .add("scalar", sizeof(T) == sizeof(double) ? "double" : "float")
+        .add("threads", detail::resolve_threads(job.threads))
+        .add("build_s", build_s)
+        .add("query_s", query_s)
+        .add("queries_per_s", query_s > 0 ? nq / query_s : std::numeric_limits<double>::infinity())
+        .add("depth", std::uint64_t{tree.depth()})
+        .add("leaves", std::uint64_t{tree.leaf_count()})
+        .add("nodes", std::uint64_t{tree.node_count()})
+        .add("index_bytes", std::uint64_t{tree.index_bytes()})
+        .add("nodes_visited_per_query", static_cast<double>(stats.nodes_visited) / nq)
+        .add("points_visited_per_query", static_cast<double>(stats.points_visited) / nq);
+    std::printf("%s\n", json.str().c_str());
+  }
+  return 0;
+}
+
+template <class T>
+struct Type {
+  using type = T;
+};
+
+/// Calls f(Type<Scalar>, Type<Metric>) for the scalar the base file holds and the chosen metric.
+template <class F>
+int with_tree_type(const SearchJob& job, F&& f) {
+  auto with_metric = [&](auto scalar) {
+    if (job.metric == "l1") return f(scalar, Type<L1>{});
+    if (job.metric == "linf") return f(scalar, Type<Linf>{});
+    return f(scalar, Type<L2>{});
+  };
+  return io::stores_double(job.base) ? with_metric(Type<double>{}) : with_metric(Type<float>{});
+}
+
+int run_search_command(Mode mode, const std::vector<std::string>& args) {
+  const char* name = mode == Mode::knn ? "knn" : "radius";
+  return run_guarded(name, [&] {
+    if (wants_help(args)) {
+      std::fputs(mode == Mode::knn ? knn_usage : radius_usage, stdout);
+      std::fputs(shared_usage, stdout);
+      return 0;
+    }
+    const SearchJob job = parse_job(mode, args);
+    // An unknown extension fails now, not after reading the base.
+    io::format_from_path(job.base);
+    io::format_from_path(job.query);
+    return with_tree_type(job, [&](auto scalar, auto metric) {
+      return run_search<typename decltype(scalar)::type, typename decltype(metric)::type>(job);
+    });
+  });
+}
+
+}  // namespace
+}  // namespace kdspace::cli
+
+int run_knn_command(const std::vector<std::string>& args) {
+  return kdspace::cli::run_search_command(kdspace::cli::Mode::knn, args);
+}
+
+int run_radius_command(const std::vector<std::string>& args) {
+  return kdspace::cli::run_search_command(kdspace::cli::Mode::radius, args);
+}

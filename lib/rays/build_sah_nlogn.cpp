@@ -1,0 +1,169 @@
+// The SAH build in O(N log N) (Wald & Havran 2006, "On building fast kd-trees for ray tracing, and
+// on doing that in O(N log N)").
+//
+// The events (box boundaries) of each axis are sorted once, at the root. A node sweeps its three
+// sorted lists to find the cheapest plane (linear), classifies its boxes as left only, right only or
+// both, and hands each child its events in order:
+//   - the events of one-sided boxes are filtered from the parent's lists, which keeps them sorted;
+//   - the boxes that straddle the plane are clipped to each child cell and their new events sorted
+//     (there are only about sqrt(n) of them in practice) and merged in.
+// Each level of the tree thus costs time linear in its references, and the whole build O(N log N).
+// It evaluates exactly the candidates of the O(N log^2 N) build with the same counts and the same
+// cost function, so both make the same tree.
+#include <algorithm>
+#include <array>
+#include <exception>
+#include <optional>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "build_common.hpp"
+#include "sah_cost.hpp"
+
+namespace kdspace::detail {
+
+namespace {
+
+struct NodeEvents {
+  std::vector<BoxRef> refs;
+  std::array<std::vector<Event>, 3> events;  ///< per axis, sorted
+};
+
+class SahNlognMethod {
+ public:
+  using Work = NodeEvents;
+
+  explicit SahNlognMethod(const BoxBuildParams& params) : params_(params) {}
+
+  std::optional<Split> choose_split(const Work& work, const Box3f& cell, std::size_t /*depth*/) const {
+    const SahCostModel model(params_, cell);
+    std::optional<SplitCandidate> best;
+    for (int axis = 0; axis < 3; ++axis) {
+      if (!(cell.lo[axis] < cell.hi[axis])) continue;  // a flat axis has no plane inside the cell
+      const std::vector<Event>& e = work.events[axis];
+      sweep_axis(e.data(), e.size(), axis, work.refs.size(), cell, model, best);
+    }
+    return accept_split(best, model, work.refs.size());
+  }
+
+  std::pair<Work, Work> partition(Work&& parent, const Box3f& /*cell*/, const Split& s) const {
+    const std::size_t n = parent.refs.size();
+    std::vector<Side> side(n);
+    std::vector<std::uint32_t> child_index(n);  // position in its child's list, for one-sided boxes
+    std::pair<Work, Work> children;
+    Work& left = children.first;
+    Work& right = children.second;
+    std::size_t straddling = 0;
+    for (std::size_t r = 0; r < n; ++r) {
+      side[r] = classify(parent.refs[r].bounds, s);
+      if (side[r] == Side::left) {
+        child_index[r] = static_cast<std::uint32_t>(left.refs.size());
+        left.refs.push_back(parent.refs[r]);
+      } else if (side[r] == Side::right) {
+        child_index[r] = static_cast<std::uint32_t>(right.refs.size());
+        right.refs.push_back(parent.refs[r]);
+      } else {
+        ++straddling;
+      }
+    }
+    const std::size_t left_single = left.refs.size(), right_single = right.refs.size();
+
+    // Straddling boxes, clipped to each child cell (their new lists start after the one-sided ones).
+    left.refs.reserve(left_single + straddling);
+    right.refs.reserve(right_single + straddling);
+    for (std::size_t r = 0; r < n; ++r) {
+      if (side[r] != Side::both) continue;
+      BoxRef l = parent.refs[r], rr = parent.refs[r];
+      l.bounds.hi[s.axis] = s.position;
+      rr.bounds.lo[s.axis] = s.position;
+      left.refs.push_back(l);
+      right.refs.push_back(rr);
+    }
+    std::vector<BoxRef>().swap(parent.refs);
+
+    for (int axis = 0; axis < 3; ++axis) {
+      std::vector<Event>& from = parent.events[axis];
+      std::vector<Event>& to_left = left.events[axis];
+      std::vector<Event>& to_right = right.events[axis];
+      to_left.reserve(2 * left.refs.size());
+      to_right.reserve(2 * right.refs.size());
+      for (const Event& e : from) {
+        const std::uint32_t ref = e.ref();
+        if (side[ref] == Side::left)
+          to_left.push_back(e.moved_to(child_index[ref]));
+        else if (side[ref] == Side::right)
+          to_right.push_back(e.moved_to(child_index[ref]));
+      }
+      std::vector<Event>().swap(from);
+      merge_new_events(to_left, left.refs, left_single, axis);
+      merge_new_events(to_right, right.refs, right_single, axis);
+    }
+    return children;
+  }
+
+  std::vector<std::uint32_t> box_ids(const Work& work) const {
+    std::vector<std::uint32_t> ids(work.refs.size());
+    for (std::size_t i = 0; i < work.refs.size(); ++i) ids[i] = work.refs[i].box;
+    return ids;
+  }
+  std::size_t size(const Work& work) const { return work.refs.size(); }
+
+  /// The root: every box's events, sorted once (the three axes at once when threads allow).
+  static Work root(const std::vector<Box3f>& boxes, unsigned threads) {
+    Work w;
+    w.refs = root_references(boxes);
+    auto sort_axis = [&w](int axis) {
+      std::vector<Event>& events = w.events[axis];
+      events.reserve(2 * w.refs.size());
+      for (std::size_t r = 0; r < w.refs.size(); ++r)
+        add_events(events, w.refs[r].bounds, axis, static_cast<std::uint32_t>(r));
+      std::sort(events.begin(), events.end());
+    };
+    if (threads < 2 || boxes.size() < 4096) {
+      for (int axis = 0; axis < 3; ++axis) sort_axis(axis);
+      return w;
+    }
+    std::exception_ptr errors[3];
+    std::vector<std::thread> helpers;
+    for (int axis = 1; axis < 3 && static_cast<unsigned>(axis) < threads; ++axis)
+      helpers.emplace_back([&, axis] {
+        try {
+          sort_axis(axis);
+        } catch (...) {
+          errors[axis] = std::current_exception();
+        }
+      });
+    sort_axis(0);
+    if (threads < 3) sort_axis(2);
+    for (std::thread& t : helpers) t.join();
+    for (const std::exception_ptr& e : errors)
+      if (e) std::rethrow_exception(e);
+    return w;
+  }
+
+ private:
+  /// Sorts the events of refs[first ..) along `axis` and merges them into the sorted `events`.
+  static void merge_new_events(std::vector<Event>& events, const std::vector<BoxRef>& refs, std::size_t first,
+                               int axis) {
+    const std::size_t old_size = events.size();
+    for (std::size_t r = first; r < refs.size(); ++r)
+      add_events(events, refs[r].bounds, axis, static_cast<std::uint32_t>(r));
+    const auto middle = events.begin() + static_cast<std::ptrdiff_t>(old_size);
+    std::sort(middle, events.end());
+    std::inplace_merge(events.begin(), middle, events.end());
+  }
+
+  const BoxBuildParams& params_;
+};
+
+}  // namespace
+
+void build_sah_nlogn(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBuildParams& params,
+                     std::size_t max_depth, TreeWriter& out) {
+  const SahNlognMethod method(params);
+  build_subtree(method, SahNlognMethod::root(boxes, build_threads(params)), bounds, 0, max_depth,
+                root_budget(params, boxes.size()), out, build_threads(params) - 1);
+}
+
+}  // namespace kdspace::detail

@@ -1,0 +1,2 @@
+# The kdspace command: exit codes, messages, outputs (tests/cli_tests.sh; needs bash and python3).
+add_test(NAME cli COMMAND bash ${CMAKE_CURRENT_SOURCE_DIR}/cli_tests.sh $<TARGET_FILE:kdspace_cli> ${CMAKE_CURRENT_BINARY_DIR}/cli-scratch)

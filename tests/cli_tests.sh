@@ -1,0 +1,294 @@
+#!/usr/bin/env bash
+# Tests of the `kdspace` command: exit codes, error messages and results.
+#
+#   usage: cli_tests.sh KDSPACE_BINARY SCRATCH_DIR
+#
+# Makes small input files (good and broken) with python3's standard library, runs the command on them
+# and checks exit codes (0 success, 2 usage error, 1 bad data or I/O), stderr messages and outputs
+# (ids compared with a brute force written in Python). Prints PASS/FAIL for each check and, last,
+# "N passed, M failed"; exits 1 if any check failed.
+set -u
+
+if [ $# -ne 2 ]; then
+  echo "usage: $0 KDSPACE_BINARY SCRATCH_DIR" >&2
+  exit 2
+fi
+KDSPACE=$(cd "$(dirname "$1")" && pwd)/$(basename "$1")
+SCRATCH=$2
+mkdir -p "$SCRATCH" && cd "$SCRATCH" || exit 2
+command -v python3 >/dev/null || { echo "python3 is needed" >&2; exit 2; }
+
+passed=0
+failed=0
+pass() { echo "PASS $1"; passed=$((passed + 1)); }
+fail() {
+  echo "FAIL $1: $2"
+  echo "  command: kdspace ${last_args:-}"
+  echo "  exit code: ${rc:-}"
+  echo "  stderr: $(head -c 600 err.txt 2>/dev/null)"
+  failed=$((failed + 1))
+}
+
+# run ARGS...: runs the command with stdin closed; stdout in out.txt, stderr in err.txt, code in $rc.
+run() {
+  last_args="$*"
+  "$KDSPACE" "$@" >out.txt 2>err.txt </dev/null
+  rc=$?
+}
+
+# expect_error NAME CODE PATTERN... -- ARGS...: the command fails with CODE, stderr begins with
+# "kdspace: error: " and contains every PATTERN (fixed strings); a usage error (2) adds the hint line.
+expect_error() {
+  local name=$1 code=$2
+  shift 2
+  local patterns=()
+  while [ $# -gt 0 ] && [ "$1" != "--" ]; do
+    patterns+=("$1")
+    shift
+  done
+  shift
+  run "$@"
+  if [ "$rc" -ne "$code" ]; then fail "$name" "expected exit code $code, got $rc"; return; fi
+  if ! head -n 1 err.txt | grep -q '^kdspace: error: '; then fail "$name" "stderr does not begin with 'kdspace: error: '"; return; fi
+  local p
+  for p in "${patterns[@]}"; do
+    if ! grep -qF -- "$p" err.txt; then fail "$name" "stderr does not mention '$p'"; return; fi
+  done
+  if [ "$code" -eq 2 ] && ! grep -q "^run 'kdspace .*--help'$" err.txt; then fail "$name" "no hint line run 'kdspace ... --help'"; return; fi
+  if [ -s out.txt ]; then fail "$name" "an error printed something on stdout"; return; fi
+  pass "$name"
+}
+
+# expect_ok NAME ARGS...: the command succeeds and prints nothing on stderr (no progress when stderr
+# is not a terminal).
+expect_ok() {
+  local name=$1
+  shift
+  run "$@"
+  if [ "$rc" -ne 0 ]; then fail "$name" "expected exit code 0, got $rc"; return 1; fi
+  if [ -s err.txt ]; then fail "$name" "stderr is not empty"; return 1; fi
+  return 0
+}
+
+# ---- input files ---------------------------------------------------------------------------------
+python3 - <<'EOF' || { echo "FAIL could not make the input files"; echo "0 passed, 1 failed"; exit 1; }
+import random, struct
+
+rng = random.Random(7)
+
+def write_csv(path, rows, header=None):
+    with open(path, "w") as f:
+        if header:
+            f.write(header + "\n")
+        for r in rows:
+            f.write(",".join(str(v) for v in r) + "\n")
+
+def write_fvecs(path, rows):
+    with open(path, "wb") as f:
+        for r in rows:
+            f.write(struct.pack("<i%df" % len(r), len(r), *r))
+
+def write_npy(path, rows, dtype="<f4"):
+    fmt = {"<f4": "f", "<f8": "d"}[dtype]
+    header = "{'descr': '%s', 'fortran_order': False, 'shape': (%d, %d), }" % (dtype, len(rows), len(rows[0]))
+    pad = 64 - (10 + len(header) + 1) % 64
+    header = header + " " * pad + "\n"
+    with open(path, "wb") as f:
+        f.write(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(header)) + header.encode("latin1"))
+        for r in rows:
+            f.write(struct.pack("<%d%s" % (len(r), fmt), *r))
+
+# Small integer coordinates: every distance is exact in float and double, and ties are frequent, so
+# the tie rule (smaller index first) is exercised too.
+base = [[rng.randint(0, 9) for _ in range(3)] for _ in range(40)]
+query = [[rng.randint(0, 9) for _ in range(3)] for _ in range(7)]
+write_csv("base.csv", base, header="x,y,z")
+write_csv("query.csv", query)
+write_npy("base.npy", base)
+write_npy("base64.npy", base, "<f8")
+write_fvecs("query.fvecs", query)
+write_csv("query4.csv", [[1, 2, 3, 4], [5, 6, 7, 8]])
+
+# Radius: two tight groups far apart and a few points between, so rows differ in length.
+cl = [[0, 0], [1, 0], [0, 1], [1, 1], [2, 2], [10, 10], [11, 10], [20, 0], [30, 30], [31, 31]]
+write_csv("cluster.csv", cl)
+write_csv("cluster_query.csv", [[0, 0], [10, 10], [30, 30], [50, 50], [5, 5]])
+
+# Broken files.
+rows = [[1.5, 2.5, 3.5]] * 5
+rows_nan = [r[:] for r in rows]
+rows_nan[2][1] = float("nan")
+write_csv("nan.csv", rows_nan, header="a,b,c")        # data row 3 holds a NaN
+write_fvecs("trunc.fvecs", [[1, 2, 3, 4]] * 3)
+data = open("trunc.fvecs", "rb").read()
+open("trunc.fvecs", "wb").write(data[:-6])             # row 3 cut short
+open("empty.csv", "w").close()
+open("empty.fvecs", "wb").close()
+write_csv("ragged.csv", [[1, 2, 3], [4, 5, 6], [7, 8]])
+write_csv("base.txt", base)
+EOF
+
+# ---- usage errors: exit 2 ------------------------------------------------------------------------
+expect_error "unknown option" 2 "--bogus" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --bogus
+expect_error "missing --base" 2 "--base" -- knn --query query.csv -k 3 --out ids.ivecs
+expect_error "missing value" 2 "--out" -- knn --base base.csv --query query.csv -k 3 --out
+expect_error "-k 0 is a usage error" 2 "-k" -- knn --base base.csv --query query.csv -k 0 --out ids.ivecs
+expect_error "-k ten" 2 "-k" "ten" -- knn --base base.csv --query query.csv -k ten --out ids.ivecs
+expect_error "-k -3" 2 "-k" "-3" -- knn --base base.csv --query query.csv -k -3 --out ids.ivecs
+expect_error "--leaf 0" 2 "--leaf" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --leaf 0
+expect_error "--metric bad" 2 "--metric" "l3" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --metric l3
+expect_error "--forest not available" 2 "not available yet" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 4
+expect_error "negative radius" 2 "-r" -- radius --base base.csv --query query.csv -r -0.5 --out ids.ivecs
+expect_error "NaN radius" 2 "-r" -- radius --base base.csv --query query.csv -r nan --out ids.ivecs
+expect_error "unknown command" 2 "frobnicate" -- frobnicate
+
+# ---- bad data and I/O: exit 1 --------------------------------------------------------------------
+expect_error "k > n" 1 "k = 41" "40" -- knn --base base.csv --query query.csv -k 41 --out ids.ivecs
+expect_error "dimension mismatch" 1 "query4.csv" "base.csv" "dimension 4" "dimension 3" -- \
+  knn --base base.csv --query query4.csv -k 3 --out ids.ivecs
+expect_error "NaN in a csv base" 1 "nan.csv: row 3" "not finite" -- knn --base nan.csv --query query.csv -k 1 --out ids.ivecs
+expect_error "NaN in csv queries" 1 "nan.csv: row 3" -- knn --base base.csv --query nan.csv -k 1 --out ids.ivecs
+expect_error "truncated fvecs" 1 "trunc.fvecs: row 3" -- knn --base trunc.fvecs --query query.csv -k 1 --out ids.ivecs
+expect_error "empty csv" 1 "empty.csv" -- knn --base empty.csv --query query.csv -k 1 --out ids.ivecs
+expect_error "empty fvecs" 1 "empty.fvecs" -- knn --base base.csv --query empty.fvecs -k 1 --out ids.ivecs
+expect_error "rows of different lengths" 1 "ragged.csv: row 3" -- knn --base ragged.csv --query query.csv -k 1 --out ids.ivecs
+expect_error "nonexistent file" 1 "missing.fvecs" -- knn --base missing.fvecs --query query.csv -k 1 --out ids.ivecs
+expect_error "unknown extension" 1 "base.txt" -- knn --base base.txt --query query.csv -k 1 --out ids.ivecs
+expect_error "unwritable output" 1 "no-such-dir/ids.ivecs" -- knn --base base.csv --query query.csv -k 1 --out no-such-dir/ids.ivecs
+
+# ---- results -------------------------------------------------------------------------------------
+# check_results NAME MODE METRIC PARAM BASE QUERY: ids.ivecs and dist.fvecs equal a Python brute force
+# (ascending distance, ties by smaller index; MODE knn: PARAM = k, MODE radius: PARAM = r).
+check_results() {
+  local name=$1
+  if python3 - "$@" <<'EOF' >check.txt 2>&1; then pass "$name"; else fail "$name" "$(cat check.txt)"; fi
+import math, struct, sys
+_, mode, metric, param, base_path, query_path = sys.argv[1:7]
+
+def read_csv(path):
+    rows = []
+    for line in open(path):
+        line = line.strip()
+        if line and not line[0].isalpha():
+            rows.append([float(v) for v in line.split(",")])
+    return rows
+
+def read_vecs(path, fmt):
+    data, rows, at = open(path, "rb").read(), [], 0
+    while at < len(data):
+        (d,) = struct.unpack_from("<i", data, at)
+        rows.append(list(struct.unpack_from("<%d%s" % (d, fmt), data, at + 4)))
+        at += 4 + 4 * d
+    return rows
+
+def dist(a, b):
+    diffs = [abs(x - y) for x, y in zip(a, b)]
+    return {"l2": math.sqrt(sum(t * t for t in diffs)), "l1": sum(diffs), "linf": max(diffs)}[metric]
+
+base, queries = read_csv(base_path), read_csv(query_path)
+ids, dists = read_vecs("ids.ivecs", "i"), read_vecs("dist.fvecs", "f")
+assert len(ids) == len(queries), "%d rows of ids for %d queries" % (len(ids), len(queries))
+for q, (query, got, got_d) in enumerate(zip(queries, ids, dists)):
+    order = sorted((dist(query, p), i) for i, p in enumerate(base))
+    want = order[: int(param)] if mode == "knn" else [(d, i) for d, i in order if d <= float(param)]
+    assert got == [i for _, i in want], "query %d: ids %s, expected %s" % (q + 1, got, [i for _, i in want])
+    for (d, _), g in zip(want, got_d):
+        assert abs(d - g) <= 1e-6 * max(1.0, d), "query %d: distance %r, expected %r" % (q + 1, g, d)
+if mode == "radius":
+    lengths = sorted(set(len(r) for r in ids))
+    assert len(lengths) > 1, "all radius rows have the same length %s" % lengths
+print("ok")
+EOF
+}
+
+if expect_ok "knn csv" knn --base base.csv --query query.csv -k 5 --out ids.ivecs --distances dist.fvecs; then
+  check_results "knn csv equals brute force" knn l2 5 base.csv query.csv
+fi
+if expect_ok "knn npy float32 base, fvecs queries" knn --base base.npy --query query.fvecs -k 7 --out ids.ivecs --distances dist.fvecs --threads 2; then
+  check_results "knn npy equals brute force" knn l2 7 base.csv query.csv
+fi
+if expect_ok "knn float64 npy base" knn --base base64.npy --query query.csv -k 4 --out ids.ivecs --distances dist.fvecs; then
+  check_results "knn float64 npy equals brute force" knn l2 4 base.csv query.csv
+fi
+for metric in l1 linf; do
+  if expect_ok "knn --metric $metric" knn --base base.csv --query query.csv -k 6 --out ids.ivecs --distances dist.fvecs \
+    --metric=$metric --axis cycle --position sliding --leaf 2; then
+    check_results "knn --metric $metric equals brute force" knn $metric 6 base.csv query.csv
+  fi
+done
+if expect_ok "knn k = n" knn --base base.csv --query query.csv -k 40 --out ids.ivecs --distances dist.fvecs --position middle --leaf 1; then
+  check_results "knn k = n equals brute force" knn l2 40 base.csv query.csv
+fi
+if expect_ok "radius" radius --base cluster.csv --query cluster_query.csv -r 1.5 --out ids.ivecs --distances dist.fvecs; then
+  check_results "radius rows of differing lengths equal brute force" radius l2 1.5 cluster.csv cluster_query.csv
+fi
+if expect_ok "radius --max-results" radius --base cluster.csv --query cluster_query.csv -r 100 --max-results 3 --out ids.ivecs; then
+  if python3 -c '
+import struct
+data, at, lengths = open("ids.ivecs", "rb").read(), 0, []
+while at < len(data):
+    (d,) = struct.unpack_from("<i", data, at); lengths.append(d); at += 4 + 4 * d
+assert lengths == [3] * 5, lengths' 2>check.txt; then pass "radius --max-results keeps M"; else fail "radius --max-results keeps M" "$(cat check.txt)"; fi
+fi
+
+# --stats: one JSON object with the required keys.
+check_stats() {
+  local name=$1 keys=$2
+  if python3 - "$keys" <<'EOF' 2>check.txt; then pass "$name"; else fail "$name" "$(cat check.txt)"; fi
+import json, sys
+text = open("out.txt").read()
+assert text.count("\n") == 1, "stdout is not one line: %r" % text
+stats = json.loads(text)
+assert isinstance(stats, dict), "not an object"
+missing = [k for k in sys.argv[1].split() if k not in stats]
+assert not missing, "missing keys %s" % missing
+assert stats["build_s"] >= 0 and stats["query_s"] >= 0 and stats["threads"] >= 1, stats
+EOF
+}
+common_keys="build_s query_s queries_per_s threads depth leaves nodes_visited_per_query points_visited_per_query points dim queries metric index_bytes"
+if expect_ok "knn --stats" knn --base base.csv --query query.csv -k 3 --out ids.ivecs --stats --threads=1; then
+  check_stats "knn --stats is JSON with the required keys" "$common_keys k"
+fi
+if expect_ok "radius --stats" radius --base cluster.csv --query cluster_query.csv -r 2 --out ids.ivecs --stats; then
+  check_stats "radius --stats is JSON with the required keys" "$common_keys radius"
+fi
+
+# ---- help, version -------------------------------------------------------------------------------
+if expect_ok "--version" --version && grep -qE '^kdspace [0-9]+\.[0-9]+\.[0-9]+$' out.txt; then pass "--version prints kdspace X.Y.Z"
+else fail "--version prints kdspace X.Y.Z" "stdout: $(cat out.txt)"; fi
+if expect_ok "--help" --help && grep -qF "kdspace knn" out.txt && grep -qF "kdspace radius" out.txt && grep -qF -- "-k 0" out.txt; then
+  pass "--help prints the usage (with the rule for -k 0)"
+else fail "--help prints the usage (with the rule for -k 0)" "stdout: $(head -c 300 out.txt)"; fi
+for cmd in knn radius demo; do
+  if expect_ok "$cmd --help" $cmd --help && grep -qF "usage: kdspace $cmd" out.txt; then pass "$cmd --help"
+  else fail "$cmd --help" "stdout: $(head -c 300 out.txt)"; fi
+done
+run
+if [ "$rc" -eq 2 ] && grep -qF "usage: kdspace" err.txt; then pass "no arguments: usage on stderr, exit 2"
+else fail "no arguments: usage on stderr, exit 2" "exit code $rc"; fi
+
+# ---- demo ----------------------------------------------------------------------------------------
+if expect_ok "demo --quick" demo --quick --out demo-out; then
+  if python3 - <<'EOF' 2>check.txt; then pass "demo --quick: exact is yes everywhere"; else fail "demo --quick: exact is yes everywhere" "$(cat check.txt)"; fi
+# Every markdown table with an "exact" column must say yes in every row.
+rows_checked, exact_col = 0, None
+for line in open("out.txt"):
+    cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.startswith("|") else None
+    if cells is None:
+        exact_col = None
+    elif any(c.startswith("exact") for c in cells):
+        exact_col = [i for i, c in enumerate(cells) if c.startswith("exact")][0]
+    elif exact_col is not None and not set(cells[0]) <= set("-: "):
+        assert cells[exact_col] == "yes", "row %r" % line.strip()
+        rows_checked += 1
+assert rows_checked >= 3, "only %d table rows with an exact column" % rows_checked
+EOF
+  if [ -s demo-out/results.md ] && expect_ok "knn on the demo's files" knn --base demo-out/uniform-3d_base.fvecs \
+    --query demo-out/uniform-3d_query.fvecs -k 10 --out demo-ids.ivecs --stats; then
+    if python3 -c 'import json; s = json.load(open("out.txt")); assert s["points"] == 100000 and s["dim"] == 3 and s["queries"] == 1000, s' 2>check.txt
+    then pass "knn on the demo's files"; else fail "knn on the demo's files" "$(cat check.txt)"; fi
+  fi
+fi
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]

@@ -1,0 +1,648 @@
+// Tests of ray shooting through BoxTree (kdspace/rays/box_tree.hpp) against brute force.
+//
+// The reference tests every box with the slab method in double precision, dividing by the direction
+// (the tree multiplies by its precomputed reciprocal), with the contract's rules: closed solid boxes,
+// a ray starting inside a box hits it at t_min, equal t goes to the smaller index.
+//
+// How answers are compared (same_hit below):
+//   - a miss must be a miss;
+//   - a hit's t must be within 1e-6 * (1 + |t|) of the reference's (the tree rounds t to float);
+//   - the box must be the reference's, unless the reference also hits the tree's box at a t within
+//     that same tolerance (two boxes whose entry points coincide up to rounding).
+// Scenes with integer coordinates and rays with integer origins and power-of-two directions are
+// computed exactly by both sides; there rays run along faces, edges and through corners.
+#include <algorithm>
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "kdspace/error.hpp"
+#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/rays/scene_gen.hpp"
+
+using kdspace::Box3f;
+using kdspace::BoxBuildMethod;
+using kdspace::BoxBuildParams;
+using kdspace::BoxTree;
+using kdspace::Hit;
+using kdspace::Ray;
+using kdspace::RayStats;
+
+namespace {
+
+constexpr double inf = std::numeric_limits<double>::infinity();
+
+// ---- the reference --------------------------------------------------------------------------------
+
+std::optional<double> reference_t(const Box3f& b, const Ray& r, double t_min, double t_max) {
+  double lo = t_min, hi = t_max;
+  for (int a = 0; a < 3; ++a) {
+    const double o = r.origin[a], d = r.direction[a];
+    if (d == 0) {
+      if (o < b.lo[a] || o > b.hi[a]) return std::nullopt;
+      continue;
+    }
+    double t0 = (b.lo[a] - o) / d, t1 = (b.hi[a] - o) / d;
+    if (t0 > t1) std::swap(t0, t1);
+    lo = std::max(lo, t0);
+    hi = std::min(hi, t1);
+  }
+  if (lo > hi) return std::nullopt;
+  return lo;
+}
+
+struct ReferenceHit {
+  int box = -1;
+  double t = inf;
+};
+
+ReferenceHit reference_closest(const std::vector<Box3f>& boxes, const Ray& r, double t_min = 0,
+                               double t_max = inf) {
+  ReferenceHit best;
+  for (std::size_t i = 0; i < boxes.size(); ++i) {
+    const auto t = reference_t(boxes[i], r, t_min, t_max);
+    if (t && (*t < best.t || best.box < 0)) best = ReferenceHit{static_cast<int>(i), *t};
+  }
+  return best;
+}
+
+double tolerance(double t) {
+  return 1e-6 * (1 + std::abs(t));
+}
+
+/// Empty when the tree's answer is acceptable, else a description for the failure message.
+std::string compare(const Hit& got, const ReferenceHit& want, const std::vector<Box3f>& boxes, const Ray& r,
+                    double t_min, double t_max) {
+  if (want.box < 0) return got.hit() ? "hit box " + std::to_string(got.box) + ", expected a miss" : "";
+  if (!got.hit())
+    return "missed, expected box " + std::to_string(want.box) + " at t " + std::to_string(want.t);
+  const double float_max = std::numeric_limits<float>::max();
+  if (want.t > float_max) {
+    if (got.t != std::numeric_limits<float>::max())
+      return "t " + std::to_string(got.t) + ", expected FLT_MAX";
+  } else if (std::abs(got.t - want.t) > tolerance(want.t))
+    return "t " + std::to_string(got.t) + ", expected " + std::to_string(want.t);
+  if (got.box == want.box) return "";
+  if (got.box < 0 || static_cast<std::size_t>(got.box) >= boxes.size()) return "box index out of range";
+  const auto t_other = reference_t(boxes[static_cast<std::size_t>(got.box)], r, t_min, t_max);
+  if (t_other &&
+      (std::abs(*t_other - want.t) <= tolerance(want.t) || (*t_other > float_max && want.t > float_max)))
+    return "";
+  return "box " + std::to_string(got.box) + ", expected box " + std::to_string(want.box) + " at t " +
+         std::to_string(want.t);
+}
+
+std::string describe(const Ray& r) {
+  std::string s = "origin (";
+  for (int a = 0; a < 3; ++a) s += std::to_string(r.origin[a]) + (a < 2 ? ", " : ") direction (");
+  for (int a = 0; a < 3; ++a)
+    s += (std::signbit(r.direction[a]) && r.direction[a] == 0 ? std::string("-0")
+                                                              : std::to_string(r.direction[a])) +
+         (a < 2 ? ", " : ")");
+  return s;
+}
+
+// ---- scenes -------------------------------------------------------------------------------------
+
+using Rng = std::mt19937;
+
+float uniform(Rng& rng, float lo, float hi) {
+  return std::uniform_real_distribution<float>(lo, hi)(rng);
+}
+int uniform_int(Rng& rng, int lo, int hi) {
+  return std::uniform_int_distribution<int>(lo, hi)(rng);
+}
+
+Box3f box_of(float x0, float y0, float z0, float x1, float y1, float z1) {
+  Box3f b;
+  b.lo = {x0, y0, z0};
+  b.hi = {x1, y1, z1};
+  return b;
+}
+
+/// Boxes of very different sizes (spanning three orders of magnitude) in [-10, 10]^3.
+std::vector<Box3f> mixed_scale_boxes(std::size_t n, Rng& rng) {
+  std::vector<Box3f> boxes(n);
+  for (Box3f& b : boxes) {
+    const float scale = std::pow(10.0f, uniform(rng, -2, 1));
+    for (int a = 0; a < 3; ++a) {
+      b.lo[a] = uniform(rng, -10, 10);
+      b.hi[a] = b.lo[a] + scale * uniform(rng, 0.05f, 1);
+    }
+  }
+  return boxes;
+}
+
+/// Large boxes in the unit cube: every point is covered by many of them.
+std::vector<Box3f> overlapping_boxes(std::size_t n, Rng& rng) {
+  std::vector<Box3f> boxes(n);
+  for (Box3f& b : boxes)
+    for (int a = 0; a < 3; ++a) {
+      b.lo[a] = uniform(rng, 0, 0.6f);
+      b.hi[a] = b.lo[a] + uniform(rng, 0.3f, 0.4f);
+    }
+  return boxes;
+}
+
+/// Flat boxes (zero thickness on one axis) on a coarse grid of planes, many of them coplanar.
+std::vector<Box3f> flat_boxes(std::size_t n, Rng& rng) {
+  std::vector<Box3f> boxes(n);
+  for (Box3f& b : boxes) {
+    const int flat_axis = uniform_int(rng, 0, 2);
+    for (int a = 0; a < 3; ++a) {
+      if (a == flat_axis) {
+        b.lo[a] = b.hi[a] = static_cast<float>(uniform_int(rng, 0, 8)) / 8;
+      } else {
+        b.lo[a] = uniform(rng, 0, 0.9f);
+        b.hi[a] = b.lo[a] + uniform(rng, 0.01f, 0.1f);
+      }
+    }
+  }
+  return boxes;
+}
+
+/// Boxes with integer corners in [0, 12]^3 and extents 0..3 per axis: cubes sharing faces, slabs,
+/// flat boxes, segments and points. Ray parameters against them are exact for integer origins.
+std::vector<Box3f> integer_boxes(std::size_t n, Rng& rng) {
+  std::vector<Box3f> boxes(n);
+  for (Box3f& b : boxes)
+    for (int a = 0; a < 3; ++a) {
+      b.lo[a] = static_cast<float>(uniform_int(rng, 0, 11));
+      b.hi[a] = b.lo[a] + static_cast<float>(uniform_int(rng, 0, 3) == 0 ? 0 : uniform_int(rng, 1, 3));
+    }
+  return boxes;
+}
+
+/// Unit cubes on a lattice, some missing: neighbours share whole faces.
+std::vector<Box3f> cube_lattice(Rng& rng) {
+  std::vector<Box3f> boxes;
+  for (int x = 0; x < 8; ++x)
+    for (int y = 0; y < 8; ++y)
+      for (int z = 0; z < 8; ++z)
+        if (uniform_int(rng, 0, 2) != 0)
+          boxes.push_back(box_of(float(x), float(y), float(z), float(x + 1), float(y + 1), float(z + 1)));
+  return boxes;
+}
+
+Box3f bounds_of(const std::vector<Box3f>& boxes) {
+  Box3f b = boxes.front();
+  for (const Box3f& x : boxes)
+    for (int a = 0; a < 3; ++a) {
+      b.lo[a] = std::min(b.lo[a], x.lo[a]);
+      b.hi[a] = std::max(b.hi[a], x.hi[a]);
+    }
+  return b;
+}
+
+// ---- rays ---------------------------------------------------------------------------------------
+
+/// Random origins around the scene, random directions of random length (0.1 to 10).
+std::vector<Ray> random_rays(std::size_t m, const Box3f& bounds, Rng& rng) {
+  std::vector<Ray> rays(m);
+  for (Ray& r : rays) {
+    for (int a = 0; a < 3; ++a) {
+      const float grow = 0.2f * (bounds.hi[a] - bounds.lo[a]) + 0.1f;
+      r.origin[a] = uniform(rng, bounds.lo[a] - grow, bounds.hi[a] + grow);
+    }
+    const float length = std::pow(10.0f, uniform(rng, -1, 1));
+    float len2 = 0;
+    do {
+      for (int a = 0; a < 3; ++a) r.direction[a] = uniform(rng, -1, 1);
+      len2 =
+          r.direction[0] * r.direction[0] + r.direction[1] * r.direction[1] + r.direction[2] * r.direction[2];
+    } while (len2 < 1e-4f);
+    for (int a = 0; a < 3; ++a) r.direction[a] *= length;
+  }
+  return rays;
+}
+
+/// Rays starting inside random boxes.
+std::vector<Ray> inside_rays(std::size_t m, const std::vector<Box3f>& boxes, Rng& rng) {
+  std::vector<Ray> rays = random_rays(m, bounds_of(boxes), rng);
+  for (Ray& r : rays) {
+    const Box3f& b = boxes[static_cast<std::size_t>(uniform_int(rng, 0, static_cast<int>(boxes.size()) - 1))];
+    for (int a = 0; a < 3; ++a) r.origin[a] = b.lo[a] == b.hi[a] ? b.lo[a] : uniform(rng, b.lo[a], b.hi[a]);
+  }
+  return rays;
+}
+
+/// Integer origins (on the lattice planes of integer scenes, so on faces, edges and corners) with
+/// directions whose components are 0 (of either sign), +-1, +-2 or +-0.5: axis-parallel rays, rays
+/// along face diagonals and through corners, all computed exactly.
+std::vector<Ray> lattice_rays(std::size_t m, int lo, int hi, Rng& rng) {
+  static const float steps[] = {1, 2, 0.5f};
+  std::vector<Ray> rays(m);
+  for (Ray& r : rays) {
+    for (int a = 0; a < 3; ++a) r.origin[a] = static_cast<float>(uniform_int(rng, lo, hi));
+    const int zeros = uniform_int(rng, 0, 2);  // 0: through corners, 1: in a plane, 2: along an axis
+    for (int a = 0; a < 3; ++a) {
+      const float sign = uniform_int(rng, 0, 1) ? 1.0f : -1.0f;
+      r.direction[a] = sign * steps[uniform_int(rng, 0, 2)];
+    }
+    for (int z = 0; z < zeros; ++z) {
+      const int a = uniform_int(rng, 0, 2);
+      r.direction[a] = uniform_int(rng, 0, 1) ? 0.0f : -0.0f;
+    }
+    if (r.direction[0] == 0 && r.direction[1] == 0 && r.direction[2] == 0) r.direction[0] = 1;
+  }
+  return rays;
+}
+
+// ---- builds -------------------------------------------------------------------------------------
+
+struct NamedParams {
+  std::string name;
+  BoxBuildParams params;
+};
+
+std::vector<NamedParams> all_builds() {
+  std::vector<NamedParams> builds;
+  BoxBuildParams p;
+  p.method = BoxBuildMethod::median;
+  builds.push_back({"median middle", p});
+  p.median_position = kdspace::MedianPosition::object_median;
+  p.leaf_size = 1;
+  builds.push_back({"median object, leaf 1", p});
+  p = BoxBuildParams{};
+  p.method = BoxBuildMethod::sah;
+  builds.push_back({"sah", p});
+  p.method = BoxBuildMethod::sah_nlogn;
+  builds.push_back({"sah_nlogn", p});
+  p.probability = kdspace::HitProbability::volume;
+  builds.push_back({"sah_nlogn volume", p});
+  p = BoxBuildParams{};
+  p.K_t = 0.1f;
+  p.K_i = 4;
+  p.empty_bonus = 0.9f;
+  builds.push_back({"sah_nlogn deep (K_t 0.1, K_i 4, bonus 0.9)", p});
+  p = BoxBuildParams{};
+  p.max_depth = 3;
+  builds.push_back({"sah_nlogn max depth 3", p});
+  return builds;
+}
+
+/// Checks closest_hit of every build against the reference for every ray over [t_min, t_max].
+void check_scene(const std::vector<Box3f>& boxes, const std::vector<Ray>& rays, double t_min = 0,
+                 double t_max = inf) {
+  std::vector<ReferenceHit> want(rays.size());
+  for (std::size_t i = 0; i < rays.size(); ++i) want[i] = reference_closest(boxes, rays[i], t_min, t_max);
+  for (const NamedParams& b : all_builds()) {
+    const BoxTree tree(boxes, b.params);
+    std::size_t failures = 0;
+    for (std::size_t i = 0; i < rays.size() && failures < 5; ++i) {
+      const Hit got = tree.closest_hit(rays[i], static_cast<float>(t_min), static_cast<float>(t_max));
+      const std::string problem = compare(got, want[i], boxes, rays[i], t_min, t_max);
+      if (!problem.empty()) {
+        ++failures;
+        FAIL_CHECK(b.name << ", " << boxes.size() << " boxes, ray " << i << " " << describe(rays[i]) << ": "
+                          << problem);
+      }
+    }
+  }
+}
+
+}  // namespace
+
+// ---- closest hit against brute force --------------------------------------------------------------
+
+TEST_CASE("rays: every build finds the brute-force closest hit in uniform and clustered scenes", "[rays]") {
+  for (std::uint32_t seed = 1; seed <= 3; ++seed) {
+    Rng rng(seed);
+    for (const auto kind : {kdspace::SceneKind::uniform, kdspace::SceneKind::clustered}) {
+      const std::vector<Box3f> boxes = kdspace::generate_boxes(1500, kind, seed);
+      check_scene(boxes, random_rays(1500, bounds_of(boxes), rng));
+    }
+  }
+}
+
+TEST_CASE("rays: every build finds the brute-force closest hit among boxes of mixed sizes", "[rays]") {
+  for (std::uint32_t seed = 1; seed <= 3; ++seed) {
+    Rng rng(seed);
+    for (const std::size_t n : {1, 2, 7, 60, 800}) {
+      const std::vector<Box3f> boxes = mixed_scale_boxes(n, rng);
+      check_scene(boxes, random_rays(800, bounds_of(boxes), rng));
+    }
+  }
+}
+
+TEST_CASE("rays: heavily overlapping boxes are traced correctly", "[rays]") {
+  Rng rng(11);
+  const std::vector<Box3f> boxes = overlapping_boxes(400, rng);
+  check_scene(boxes, random_rays(1000, bounds_of(boxes), rng));
+  check_scene(boxes, inside_rays(500, boxes, rng));
+}
+
+TEST_CASE("rays: flat boxes, many of them coplanar, are hit from both sides and along their plane",
+          "[rays]") {
+  for (std::uint32_t seed = 1; seed <= 3; ++seed) {
+    Rng rng(seed);
+    const std::vector<Box3f> boxes = flat_boxes(600, rng);
+    check_scene(boxes, random_rays(1000, bounds_of(boxes), rng));
+    // Rays lying in the grid planes of the flat boxes.
+    std::vector<Ray> in_plane = random_rays(600, bounds_of(boxes), rng);
+    for (Ray& r : in_plane) {
+      const int a = uniform_int(rng, 0, 2);
+      r.origin[a] = static_cast<float>(uniform_int(rng, 0, 8)) / 8;
+      r.direction[a] = uniform_int(rng, 0, 1) ? 0.0f : -0.0f;
+    }
+    check_scene(boxes, in_plane);
+  }
+}
+
+TEST_CASE("rays: rays along faces, edges and through corners of integer boxes are exact", "[rays]") {
+  for (std::uint32_t seed = 1; seed <= 4; ++seed) {
+    Rng rng(seed);
+    const std::vector<Box3f> boxes = integer_boxes(seed == 1 ? 40 : 300, rng);
+    check_scene(boxes, lattice_rays(1500, -1, 15, rng));
+  }
+}
+
+TEST_CASE("rays: cubes sharing faces: rays along the shared faces and edges", "[rays]") {
+  Rng rng(5);
+  const std::vector<Box3f> boxes = cube_lattice(rng);
+  check_scene(boxes, lattice_rays(2000, -1, 9, rng));
+  check_scene(boxes, random_rays(500, bounds_of(boxes), rng));
+}
+
+TEST_CASE("rays: a ray starting inside a box hits it at t_min", "[rays]") {
+  Rng rng(6);
+  const std::vector<Box3f> boxes = kdspace::generate_boxes(500, kdspace::SceneKind::uniform, 6);
+  const std::vector<Ray> rays = inside_rays(500, boxes, rng);
+  check_scene(boxes, rays);
+  const BoxTree tree(boxes);
+  for (const Ray& r : rays) {
+    const Hit h = tree.closest_hit(r);
+    REQUIRE(h.hit());
+    CHECK(h.t == 0.0f);
+    const Hit later = tree.closest_hit(r, 0.25f);
+    if (later.hit()) CHECK(later.t >= 0.25f);
+  }
+  // A single box, from its centre (still inside at t_min = 0.5), and leaving from a corner and from a
+  // face: the starting point is on the closed box, the points beyond it are not.
+  const BoxTree one(std::vector<Box3f>{box_of(0, 0, 0, 1, 1, 1)});
+  const Hit centre = one.closest_hit(Ray{{0.5f, 0.5f, 0.5f}, {1, 0, 0}}, 0.5f);
+  CHECK(centre.box == 0);
+  CHECK(centre.t == 0.5f);
+  for (const Ray& r : {Ray{{0, 0, 0}, {-1, -1, -1}}, Ray{{1, 0.5f, 0.5f}, {1, 0, 0}}}) {
+    const Hit start = one.closest_hit(r);
+    CHECK(start.box == 0);
+    CHECK(start.t == 0.0f);
+    CHECK_FALSE(one.closest_hit(r, 0.5f).hit());
+  }
+}
+
+TEST_CASE("rays: t_min and t_max bound the hits", "[rays]") {
+  Rng rng(7);
+  const std::vector<Box3f> boxes = kdspace::generate_boxes(800, kdspace::SceneKind::uniform, 7);
+  const std::vector<Ray> rays = random_rays(500, bounds_of(boxes), rng);
+  check_scene(boxes, rays, 0.3, 0.9);
+  check_scene(boxes, rays, 0.5, 0.5);
+  check_scene(boxes, rays, -2.0, 0.1);
+}
+
+TEST_CASE("rays: equal t goes to the smaller box index", "[rays]") {
+  // Identical boxes, listed out of order among others: the smallest index of the copies wins.
+  std::vector<Box3f> boxes;
+  Rng rng(8);
+  for (int i = 0; i < 30; ++i) boxes.push_back(box_of(5, 5, 5, 6, 6, 6));
+  for (const Box3f& b : mixed_scale_boxes(50, rng)) boxes.push_back(b);
+  for (int i = 0; i < 30; ++i) boxes.push_back(box_of(5, 5, 5, 6, 6, 6));
+  for (const NamedParams& b : all_builds()) {
+    const BoxTree tree(boxes, b.params);
+    const Hit h = tree.closest_hit(Ray{{5.5f, 5.5f, -20}, {0, 0, 1}});
+    CHECK(h.box == 0);
+    CHECK(h.t == 25.0f);
+  }
+  // Two cubes sharing the face x = 1, the ray arriving along that face: both are entered at t = 1.
+  const std::vector<Box3f> pair{box_of(1, 0, 0, 2, 1, 1), box_of(0, 0, 0, 1, 1, 1)};
+  for (const NamedParams& b : all_builds()) {
+    const BoxTree tree(pair, b.params);
+    const Hit h = tree.closest_hit(Ray{{1, 0.5f, -1}, {0, 0, 1}});
+    CHECK(h.box == 0);
+    CHECK(h.t == 1.0f);
+  }
+}
+
+TEST_CASE("rays: direction components +0 and -0 give the same answers", "[rays]") {
+  Rng rng(9);
+  const std::vector<Box3f> boxes = integer_boxes(300, rng);
+  const BoxTree tree(boxes);
+  for (const Ray& base : lattice_rays(1000, -1, 15, rng)) {
+    Ray flipped = base;
+    for (float& d : flipped.direction)
+      if (d == 0) d = std::signbit(d) ? 0.0f : -0.0f;
+    const Hit a = tree.closest_hit(base), b = tree.closest_hit(flipped);
+    CHECK(a.box == b.box);
+    if (a.hit()) CHECK(a.t == b.t);
+  }
+}
+
+TEST_CASE("rays: a single box, a single point and a single flat box", "[rays]") {
+  Rng rng(10);
+  for (const Box3f& box : {box_of(1, 2, 3, 4, 5, 6), box_of(1, 1, 1, 1, 1, 1), box_of(0, 0, 2, 3, 3, 2)}) {
+    const std::vector<Box3f> boxes{box};
+    check_scene(boxes, lattice_rays(500, -1, 6, rng));
+    check_scene(boxes, random_rays(200, bounds_of(boxes), rng));
+  }
+  const BoxTree point(std::vector<Box3f>{box_of(1, 1, 1, 1, 1, 1)});
+  const Hit h = point.closest_hit(Ray{{0, 0, 0}, {1, 1, 1}});
+  CHECK(h.box == 0);
+  CHECK(h.t == 1.0f);
+  CHECK_FALSE(point.closest_hit(Ray{{0, 0, 0}, {1, 1, 1.0001f}}).hit());
+}
+
+TEST_CASE("rays: degenerate scenes: identical boxes, identical points, a flat scene", "[rays]") {
+  Rng rng(12);
+  std::vector<Box3f> same(200, box_of(0, 0, 0, 1, 1, 1));
+  std::vector<Box3f> points(200, box_of(2, 2, 2, 2, 2, 2));
+  std::vector<Box3f> plane = flat_boxes(300, rng);
+  for (Box3f& b : plane) b.lo[2] = b.hi[2] = 0.5f;  // all in the plane z = 0.5
+  std::vector<Box3f> grid_points;
+  for (int x = 0; x < 6; ++x)
+    for (int y = 0; y < 6; ++y)
+      for (int z = 0; z < 6; ++z)
+        grid_points.push_back(box_of(float(x), float(y), float(z), float(x), float(y), float(z)));
+  for (const std::vector<Box3f>* boxes : {&same, &points, &plane, &grid_points}) {
+    check_scene(*boxes, random_rays(300, bounds_of(*boxes), rng));
+    check_scene(*boxes, lattice_rays(600, -1, 7, rng));
+  }
+  const BoxTree tree(same);
+  CHECK(tree.leaf_count() == 1);
+  CHECK(tree.closest_hit(Ray{{0.5f, 0.5f, 3}, {0, 0, -1}}).box == 0);
+}
+
+TEST_CASE("rays: an empty tree misses every ray", "[rays]") {
+  const BoxTree tree(std::vector<Box3f>{});
+  CHECK(tree.size() == 0);
+  CHECK_FALSE(tree.closest_hit(Ray{{0, 0, 0}, {1, 0, 0}}).hit());
+  CHECK_FALSE(tree.any_hit(Ray{{0, 0, 0}, {1, 0, 0}}).hit());
+  CHECK(tree.closest_hit_batch(std::vector<Ray>(3, Ray{{0, 0, 0}, {0, 1, 0}})).size() == 3);
+}
+
+// ---- any hit ------------------------------------------------------------------------------------
+
+TEST_CASE("rays: any_hit agrees with closest_hit on hit or miss and returns a real hit", "[rays]") {
+  Rng rng(13);
+  for (const auto kind : {kdspace::SceneKind::uniform, kdspace::SceneKind::clustered}) {
+    const std::vector<Box3f> boxes = kdspace::generate_boxes(1000, kind, 13);
+    std::vector<Ray> rays = random_rays(1000, bounds_of(boxes), rng);
+    const std::vector<Ray> lattice = lattice_rays(300, 0, 1, rng);
+    rays.insert(rays.end(), lattice.begin(), lattice.end());
+    for (const NamedParams& b : all_builds()) {
+      const BoxTree tree(boxes, b.params);
+      for (const Ray& r : rays)
+        for (const auto& [t_min, t_max] :
+             {std::pair<float, float>{0, INFINITY}, std::pair<float, float>{0.2f, 0.6f}}) {
+          const Hit closest = tree.closest_hit(r, t_min, t_max);
+          const Hit any = tree.any_hit(r, t_min, t_max);
+          REQUIRE(closest.hit() == any.hit());
+          if (!any.hit()) continue;
+          const auto t = reference_t(boxes[static_cast<std::size_t>(any.box)], r, t_min, t_max);
+          REQUIRE(t.has_value());
+          CHECK(std::abs(*t - any.t) <= tolerance(*t));
+          CHECK(any.t >= closest.t);
+        }
+    }
+  }
+}
+
+TEST_CASE("rays: any_hit stops early: it visits no more than closest_hit", "[rays]") {
+  const std::vector<Box3f> boxes = kdspace::generate_boxes(5000, kdspace::SceneKind::uniform, 14);
+  Rng rng(14);
+  const std::vector<Ray> rays = random_rays(2000, bounds_of(boxes), rng);
+  const BoxTree tree(boxes);
+  RayStats closest, any;
+  tree.closest_hit_batch(rays, 1, &closest);
+  tree.any_hit_batch(rays, 1, &any);
+  CHECK(any.rays == closest.rays);
+  CHECK(any.boxes_tested <= closest.boxes_tested);
+  CHECK(any.nodes_visited <= closest.nodes_visited);
+}
+
+// ---- batches ------------------------------------------------------------------------------------
+
+TEST_CASE("rays: batches give the hits and stats of single rays on 1, 2 and 4 threads", "[rays][threads]") {
+  const std::vector<Box3f> boxes = kdspace::generate_boxes(3000, kdspace::SceneKind::clustered, 15);
+  Rng rng(15);
+  const std::vector<Ray> rays = random_rays(5000, bounds_of(boxes), rng);
+  const BoxTree tree(boxes);
+  std::vector<Hit> single_closest, single_any;
+  RayStats single_stats;
+  for (const Ray& r : rays) {
+    single_closest.push_back(tree.closest_hit(r, 0, INFINITY, &single_stats));
+    single_any.push_back(tree.any_hit(r));
+  }
+  for (const unsigned threads : {1u, 2u, 4u}) {
+    RayStats stats;
+    const std::vector<Hit> closest = tree.closest_hit_batch(rays, threads, &stats);
+    const std::vector<Hit> any = tree.any_hit_batch(rays, threads);
+    REQUIRE(closest.size() == rays.size());
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      REQUIRE(closest[i].box == single_closest[i].box);
+      REQUIRE(closest[i].t == single_closest[i].t);
+      REQUIRE(any[i].box == single_any[i].box);
+    }
+    CHECK(stats.rays == single_stats.rays);
+    CHECK(stats.nodes_visited == single_stats.nodes_visited);
+    CHECK(stats.boxes_tested == single_stats.boxes_tested);
+  }
+}
+
+TEST_CASE("rays: trace statistics count rays, nodes and box tests", "[rays]") {
+  const std::vector<Box3f> boxes = kdspace::generate_boxes(2000, kdspace::SceneKind::uniform, 16);
+  Rng rng(16);
+  const std::vector<Ray> rays = random_rays(1000, bounds_of(boxes), rng);
+  const BoxTree tree(boxes);
+  RayStats stats;
+  tree.closest_hit_batch(rays, 1, &stats);
+  CHECK(stats.rays == rays.size());
+  CHECK(stats.nodes_visited >= stats.rays / 2);  // rays that meet the scene bounds enter the root
+  CHECK(stats.boxes_tested_per_ray() < 100);     // far fewer than the 2000 of brute force
+  CHECK(stats.nodes_visited_per_ray() > 1);
+}
+
+// ---- bad input ----------------------------------------------------------------------------------
+
+TEST_CASE("rays: bad boxes throw an Error naming the box, 1-based", "[rays]") {
+  using Catch::Contains;
+  std::vector<Box3f> boxes(20, box_of(0, 0, 0, 1, 1, 1));
+  boxes[16] = box_of(3, 0, 0, 1, 1, 1);
+  CHECK_THROWS_WITH(BoxTree(boxes), "box 17: min x 3 > max x 1");
+  boxes[16] = box_of(0, 0, 0, 1, 1, 1);
+  boxes[4].lo[1] = std::numeric_limits<float>::quiet_NaN();
+  CHECK_THROWS_WITH(BoxTree(boxes), "box 5: min y is nan");
+  boxes[4].lo[1] = 0;
+  boxes[0].hi[2] = std::numeric_limits<float>::infinity();
+  CHECK_THROWS_WITH(BoxTree(boxes), "box 1: max z is inf");
+  boxes[0].hi[2] = 1;
+  CHECK_NOTHROW(BoxTree(boxes));
+}
+
+TEST_CASE("rays: bad rays and ranges throw an Error", "[rays]") {
+  const BoxTree tree(std::vector<Box3f>{box_of(0, 0, 0, 1, 1, 1)});
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  CHECK_THROWS_WITH(tree.closest_hit(Ray{{0, 0, 0}, {0, 0, 0}}), "ray: direction is zero");
+  CHECK_THROWS_WITH(tree.closest_hit(Ray{{0, 0, 0}, {-0.0f, 0, -0.0f}}), "ray: direction is zero");
+  CHECK_THROWS_WITH(tree.any_hit(Ray{{0, nan, 0}, {1, 0, 0}}), "ray: origin y is nan");
+  CHECK_THROWS_WITH(tree.closest_hit(Ray{{0, 0, 0}, {1, 0, INFINITY}}), "ray: direction z is inf");
+  CHECK_THROWS_AS(tree.closest_hit(Ray{{0, 0, 0}, {1, 0, 0}}, 2, 1), kdspace::Error);
+  CHECK_THROWS_AS(tree.closest_hit(Ray{{0, 0, 0}, {1, 0, 0}}, nan), kdspace::Error);
+  CHECK_THROWS_AS(tree.closest_hit(Ray{{0, 0, 0}, {1, 0, 0}}, 0, nan), kdspace::Error);
+  CHECK_THROWS_AS(tree.closest_hit(Ray{{0, 0, 0}, {1, 0, 0}}, -INFINITY), kdspace::Error);
+  std::vector<Ray> rays(20, Ray{{0, 0, 0}, {1, 0, 0}});
+  rays[11].direction = {0, 0, 0};
+  CHECK_THROWS_WITH(tree.closest_hit_batch(rays, 2), "ray 12: direction is zero");
+  CHECK_THROWS_WITH(tree.any_hit_batch(rays, 1), "ray 12: direction is zero");
+  // A tiny direction is fine: its reciprocal is computed in double.
+  const Hit h = tree.closest_hit(Ray{{-1e-35f, 0.5f, 0.5f}, {1e-40f, 0, 0}});
+  CHECK(h.box == 0);
+  CHECK(h.t == Approx(1e5).epsilon(1e-5));
+}
+
+TEST_CASE("rays: bad build parameters throw an Error", "[rays]") {
+  const std::vector<Box3f> boxes(3, box_of(0, 0, 0, 1, 1, 1));
+  BoxBuildParams p;
+  p.K_i = 0;
+  CHECK_THROWS_AS(BoxTree(boxes, p), kdspace::Error);
+  p = BoxBuildParams{};
+  p.K_t = -1;
+  CHECK_THROWS_AS(BoxTree(boxes, p), kdspace::Error);
+  p = BoxBuildParams{};
+  p.empty_bonus = 1;
+  CHECK_THROWS_AS(BoxTree(boxes, p), kdspace::Error);
+  p = BoxBuildParams{};
+  p.max_depth = kdspace::max_box_tree_depth + 1;
+  CHECK_THROWS_AS(BoxTree(boxes, p), kdspace::Error);
+  p = BoxBuildParams{};
+  p.method = BoxBuildMethod::median;
+  p.leaf_size = 0;
+  CHECK_THROWS_AS(BoxTree(boxes, p), kdspace::Error);
+}
+
+// ---- coordinates at the extremes of float -----------------------------------------------------------
+
+TEST_CASE("rays: boxes near the float range and far from the origin", "[rays]") {
+  Rng rng(17);
+  std::vector<Box3f> boxes;
+  const float big = 1e38f;
+  boxes.push_back(box_of(-3e38f, -big, -big, -1e37f, big, big));
+  boxes.push_back(box_of(1e30f, 1e30f, 1e30f, 2e30f, 2e30f, 2e30f));
+  for (const Box3f& b : mixed_scale_boxes(100, rng)) {
+    Box3f far = b;
+    for (int a = 0; a < 3; ++a) {
+      far.lo[a] += 1e6f;
+      far.hi[a] += 1e6f;
+    }
+    boxes.push_back(far);
+  }
+  std::vector<Ray> rays =
+      random_rays(300, bounds_of(std::vector<Box3f>(boxes.begin() + 2, boxes.end())), rng);
+  rays.push_back(Ray{{0, 0, 0}, {1, 1, 1}});
+  rays.push_back(Ray{{-3e38f, 0, 0}, {-1, 0, 0}});
+  check_scene(boxes, rays);
+}
