@@ -23,6 +23,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/rays/box_tree.hpp"
+#include "kdspace/rays/brute_force.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 
 using kdspace::Box3f;
@@ -39,36 +40,16 @@ constexpr double inf = std::numeric_limits<double>::infinity();
 
 // ---- the reference --------------------------------------------------------------------------------
 
-std::optional<double> reference_t(const Box3f& b, const Ray& r, double t_min, double t_max) {
-  double lo = t_min, hi = t_max;
-  for (int a = 0; a < 3; ++a) {
-    const double o = r.origin[a], d = r.direction[a];
-    if (d == 0) {
-      if (o < b.lo[a] || o > b.hi[a]) return std::nullopt;
-      continue;
-    }
-    double t0 = (b.lo[a] - o) / d, t1 = (b.hi[a] - o) / d;
-    if (t0 > t1) std::swap(t0, t1);
-    lo = std::max(lo, t0);
-    hi = std::min(hi, t1);
-  }
-  if (lo > hi) return std::nullopt;
-  return lo;
-}
+// The reference lives in kdspace/rays/brute_force.hpp (slab method in double, by division).
+using kdspace::ReferenceHit;
 
-struct ReferenceHit {
-  int box = -1;
-  double t = inf;
-};
+std::optional<double> reference_t(const Box3f& b, const Ray& r, double t_min, double t_max) {
+  return kdspace::slab_entry(b, r, t_min, t_max);
+}
 
 ReferenceHit reference_closest(const std::vector<Box3f>& boxes, const Ray& r, double t_min = 0,
                                double t_max = inf) {
-  ReferenceHit best;
-  for (std::size_t i = 0; i < boxes.size(); ++i) {
-    const auto t = reference_t(boxes[i], r, t_min, t_max);
-    if (t && (*t < best.t || best.box < 0)) best = ReferenceHit{static_cast<int>(i), *t};
-  }
-  return best;
+  return kdspace::brute_force_closest_hit(boxes, r, t_min, t_max);
 }
 
 double tolerance(double t) {

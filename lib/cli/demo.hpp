@@ -46,7 +46,16 @@ struct Step {
   void (*run)(Context&);
 };
 
+/// 1234567 -> "1,234,567" (rounded to a whole number).
+std::string with_commas(double value);
+/// value with `decimals` digits after the point.
+std::string fixed(double value, int decimals);
+
 /// Exact k-NN and radius search with PointTree on three generated data sets (demo_points.cpp).
 void point_search_step(Context& context);
+
+/// BoxTree builds, closest-hit tracing checked against brute force, and a rendered picture
+/// (demo_rays.cpp).
+void ray_shooting_step(Context& context);
 
 }  // namespace kdspace::cli::demo

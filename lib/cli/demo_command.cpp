@@ -1,5 +1,7 @@
 // `kdspace demo [--out DIR] [--threads T] [--quick]`: runs the demo steps in order, prints their
 // tables, writes the report (and the steps' data) under DIR, and exits 1 if any check failed.
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -22,6 +24,18 @@ void Context::report(const std::string& text) {
   std::fflush(stdout);
 }
 
+std::string with_commas(double value) {
+  std::string digits = std::to_string(static_cast<std::uint64_t>(std::llround(value)));
+  for (std::size_t i = digits.size(); i > 3; i -= 3) digits.insert(i - 3, ",");
+  return digits;
+}
+
+std::string fixed(double value, int decimals) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", decimals, value);
+  return buf;
+}
+
 void Context::fail(const std::string& what) {
   failures_.push_back(what);
   std::fprintf(stderr, "kdspace: demo: check failed: %s\n", what.c_str());
@@ -33,6 +47,7 @@ namespace {
 const std::vector<Step>& steps() {
   static const std::vector<Step> list = {
       {"point search", point_search_step},
+      {"ray shooting", ray_shooting_step},
   };
   return list;
 }

@@ -130,17 +130,6 @@ double queries_per_second(std::size_t queries, Run&& run) {
   return static_cast<double>(queries) / best;
 }
 
-std::string with_commas(double value) {
-  std::string digits = std::to_string(static_cast<std::uint64_t>(std::llround(value)));
-  for (std::size_t i = digits.size(); i > 3; i -= 3) digits.insert(i - 3, ",");
-  return digits;
-}
-
-std::string fixed(double value, int decimals) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", decimals, value);
-  return buf;
-}
 
 // Whether a row of the tree equals the brute-force answer, value for value: same indices, same
 // distances, same order.
@@ -245,7 +234,7 @@ void point_search_step(Context& context) {
                  ", the radius being the median distance of the 10th neighbour:\n" + notes);
   context.report("Exact: for " + std::to_string(checked_queries) +
                  " queries a data set, k-NN and radius results equal brute_force_knn and brute_force_radius "
-                 "bit for bit (indices and distances, in the contract's order: true distance, then index); "
+                 "bit for bit (indices and distances, in the contract's order: distance (squared for L2), then index); "
                  "k-NN on one thread equals k-NN on " +
                  all_label + " for every query.\n\n");
 }
