@@ -267,6 +267,53 @@ run
 if [ "$rc" -eq 2 ] && grep -qF "usage: kdspace" err.txt; then pass "no arguments: usage on stderr, exit 2"
 else fail "no arguments: usage on stderr, exit 2" "exit code $rc"; fi
 
+# ---- rays and render ------------------------------------------------------------------------------
+python3 - <<'EOF'
+import struct
+def boxes(path, items):
+    with open(path, "wb") as f:
+        f.write(struct.pack("<Q", len(items)))
+        for b in items: f.write(struct.pack("<6f", *b))
+def rays(path, items):
+    with open(path, "wb") as f:
+        f.write(struct.pack("<Q", len(items)))
+        for r in items: f.write(struct.pack("<6f", *r))
+# Three unit cubes along x; rays along +x from the left hit box 0 at t = 1 (direction length 1) or
+# t = 0.5 (length 2); a ray starting inside box 1 hits it at t = 0; a ray going up misses.
+boxes("scene.boxes", [(0,0,0,1,1,1), (2,0,0,3,1,1), (4,0,0,5,1,1)])
+rays("scene.rays", [(-1,.5,.5,1,0,0), (-1,.5,.5,2,0,0), (2.5,.5,.5,1,0,0), (-1,.5,.5,0,0,1), (6,.5,.5,-1,0,0)])
+boxes("bad.boxes", [(0,0,0,1,1,1), (3,0,0,1,1,1)])
+rays("zero.rays", [(0,0,0,1,0,0), (0,0,0,0,0,0)])
+open("short.boxes", "wb").write(struct.pack("<Q", 5) + b"\0" * 24)
+EOF
+for build in median sah sah-nlogn; do
+  if expect_ok "rays --build $build" rays --boxes scene.boxes --rays scene.rays --out hits.bin --build "$build" --stats; then
+    if python3 - <<'EOF' 2>check.txt; then pass "rays --build $build: hits and stats"; else fail "rays --build $build: hits and stats" "$(cat check.txt)"; fi
+import json, struct, math
+data = open("hits.bin", "rb").read()
+(m,) = struct.unpack_from("<Q", data)
+hits = [struct.unpack_from("<if", data, 8 + 8 * i) for i in range(m)]
+want = [(0, 1.0), (0, 0.5), (1, 0.0), (-1, math.inf), (2, 1.0)]
+assert m == 5 and len(data) == 8 + 8 * m, (m, len(data))
+for got, exp in zip(hits, want):
+    assert got[0] == exp[0] and (got[1] == exp[1] or abs(got[1] - exp[1]) < 1e-6), (hits, want)
+s = json.load(open("out.txt"))
+for key in ("build_s", "trace_s", "mrays_per_s", "threads", "depth", "leaves", "nodes_visited_per_ray", "boxes_tested_per_ray"):
+    assert key in s, key
+EOF
+  fi
+done
+expect_error "rays: box with min > max" 1 "bad.boxes" "box 2" -- rays --boxes bad.boxes --rays scene.rays --out hits.bin
+expect_error "rays: zero direction" 1 "zero.rays" "ray 2" "zero" -- rays --boxes scene.boxes --rays zero.rays --out hits.bin
+expect_error "rays: truncated boxes file" 1 "short.boxes" -- rays --boxes short.boxes --rays scene.rays --out hits.bin
+expect_error "rays: missing --rays" 2 "--rays" -- rays --boxes scene.boxes --out hits.bin
+expect_error "rays: unknown build" 2 "--build" -- rays --boxes scene.boxes --rays scene.rays --out hits.bin --build octree
+if expect_ok "render" render --boxes scene.boxes --out scene.png --width 64 --height 48; then
+  if python3 -c 'import struct; d = open("scene.png", "rb").read(); assert d[:8] == b"\x89PNG\r\n\x1a\n"; w, h = struct.unpack(">II", d[16:24]); assert (w, h) == (64, 48), (w, h)' 2>check.txt
+  then pass "render writes a 64 x 48 PNG"; else fail "render writes a 64 x 48 PNG" "$(cat check.txt)"; fi
+fi
+expect_error "render: width 0" 2 "--width" -- render --boxes scene.boxes --out scene.png --width 0
+
 # ---- demo ----------------------------------------------------------------------------------------
 if expect_ok "demo --quick" demo --quick --out demo-out; then
   if python3 - <<'EOF' 2>check.txt; then pass "demo --quick: exact is yes everywhere"; else fail "demo --quick: exact is yes everywhere" "$(cat check.txt)"; fi
