@@ -185,13 +185,19 @@ TEST_CASE("a 1-D npy array is read as one column", "[io]") {
   require_equal(io::read_points<float>(p), matrix<float>(3, 1, {1, 2, 3}));
 }
 
-TEST_CASE("a csv first line with a field that is not a number is a header and skipped", "[io]") {
+TEST_CASE("a csv first line with no number in it is a header and skipped", "[io]") {
   TempDir tmp;
   const std::string p = tmp.file("h.csv");
   write_file(p, "x,y,label 3\n1,2,3\n4.5,-6e2,0x10\n");
   require_equal(io::read_points<double>(p), matrix<double>(2, 3, {1, 2, 3, 4.5, -600, 16}));
-  write_file(p, "x,2\n1,2\n");  // one non-number is enough
-  require_equal(io::read_points<double>(p), matrix<double>(1, 2, {1, 2}));
+}
+
+TEST_CASE("a csv first line mixing numbers and text is a bad data row, not a header", "[io]") {
+  TempDir tmp;
+  const std::string p = tmp.file("m.csv");
+  write_file(p, "1,2,3x\n4,5,6\n");  // a typo in the first row must not silently drop it
+  REQUIRE_THROWS_WITH(io::read_points<double>(p),
+                      Catch::Contains(p) && Catch::Contains("row 1") && Catch::Contains("'3x' is not a number"));
 }
 
 TEST_CASE("a csv first line of numbers is data, not a header", "[io]") {

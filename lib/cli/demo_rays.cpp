@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "demo.hpp"
+#include "kdspace/io/scene.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/rays/box_tree.hpp"
 #include "kdspace/rays/brute_force.hpp"
@@ -60,9 +61,17 @@ void ray_shooting_step(Context& context) {
       scene.lo[a] = std::min(scene.lo[a], b.lo[a]);
       scene.hi[a] = std::max(scene.hi[a], b.hi[a]);
     }
+  if (!s.out_dir.empty()) {  // for trying `kdspace rays` and `kdspace render` on
+    io::write_boxes(context.out_path("scene.boxes"), boxes);
+    context.wrote(context.out_path("scene.boxes"));
+  }
   const Camera camera = fit_camera(scene, static_cast<double>(width) / static_cast<double>(height));
   const std::vector<Ray> camera_rays = primary_rays(camera, width, height);
   const std::vector<Ray> random = random_rays(s.quick ? 20000 : 200000, scene, scene_seed + 1);
+  if (!s.out_dir.empty()) {
+    io::write_rays(context.out_path("random.rays"), random);
+    context.wrote(context.out_path("random.rays"));
+  }
 
   context.report("\n## Ray shooting: " + with_commas(static_cast<double>(n)) +
                  " boxes in Gaussian clusters, closest hit\n\n"

@@ -539,7 +539,8 @@ Matrix<T> read_csv_points(InFile& in) {
     }
     if (blank_line) RowRef{path, m.rows + 1, blank_line}.fail("blank line (allowed only at the end of the file)");
     split_fields(line, fields);
-    if (line_no == 1 && !std::all_of(fields.begin(), fields.end(),
+    // Line 1 is a header when none of its fields is a number; a mix is a data row with a bad field.
+    if (line_no == 1 && std::none_of(fields.begin(), fields.end(),
                                      [&](std::string_view f) { return parse_number(f, scratch, v); })) {
       header = true;
       continue;

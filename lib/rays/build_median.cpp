@@ -1,5 +1,5 @@
 // The median build: the classic kd-tree rule. The split axis cycles with depth (x, y, z, x, ...) and
-// the plane lies at the spatial middle of the cell or at the median of the box centres; a node with
+// the plane lies at the spatial middle of the cell or at the lower face of the median box; a node with
 // at most leaf_size boxes (S_minObj) or at max_depth (S_maxProf) becomes a leaf.
 #include <algorithm>
 #include <optional>

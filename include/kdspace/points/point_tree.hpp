@@ -57,7 +57,7 @@ class PointTree {
   using Node = detail::PointNode<T>;
 
   /// Builds from n points of `dim` coordinates, row-major: point i is rows[i*dim .. i*dim + dim).
-  /// Throws Error for n = 0, dim = 0 (or dim != Dim), non-finite coordinates, n >= 2^31.
+  /// Throws Error for n = 0, dim = 0 (or dim != Dim), non-finite coordinates, n >= 2^30.
   PointTree(const T* rows, std::size_t n, std::size_t dim, const BuildParams& params = {}) : dim_(dim) {
     validate_build(rows, n, dim, params);
     build(rows, n, params);
@@ -298,7 +298,11 @@ class PointTree {
       terms.data[a] = Metric::term(diff);
       bound = Metric::accumulate(bound, terms.data[a]);
     }
-    const T eps_scale = Metric::to_internal(static_cast<T>(1 + params.eps));
+    // (1 + eps) in internal units, worked out in double: a huge eps becomes infinity, never UB.
+    const double eps_scale_wide = Metric::to_internal(1.0 + params.eps);
+    const T eps_scale = eps_scale_wide > static_cast<double>(std::numeric_limits<T>::max())
+                            ? std::numeric_limits<T>::infinity()
+                            : static_cast<T>(eps_scale_wide);
     const std::uint64_t checks_end = params.max_checks > UINT64_MAX - stats.points_visited
                                          ? UINT64_MAX
                                          : stats.points_visited + params.max_checks;

@@ -123,10 +123,9 @@ class Builder {
       std::vector<T> left_hi = cell_hi, right_lo = cell_lo;
       left_hi[axis] = part.plane;
       right_lo[axis] = part.plane;
-      Subtree left;
-      std::thread worker([&] { left = build_node(begin, mid, depth + 1, cell_lo, left_hi, parallel_levels - 1); });
-      Subtree right = build_node(mid, end, depth + 1, right_lo, cell_hi, parallel_levels - 1);
-      worker.join();
+      Subtree left, right;
+      fork_join([&] { left = build_node(begin, mid, depth + 1, cell_lo, left_hi, parallel_levels - 1); },
+                [&] { right = build_node(mid, end, depth + 1, right_lo, cell_hi, parallel_levels - 1); });
       append_subtree(out, left);
       out.nodes[self].link = static_cast<std::uint32_t>(out.nodes.size());
       append_subtree(out, right);

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cstddef>
+#include <exception>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -15,7 +17,8 @@ inline unsigned resolve_threads(unsigned threads) {
 
 /// Calls body(begin, end, worker) over [0, n) in chunks taken from a shared counter, on up to
 /// `threads` threads (0 = all hardware threads). `worker` < the number of threads used, so a body may
-/// keep per-worker state. Each item is processed exactly once, whatever the thread count.
+/// keep per-worker state. Each item is processed exactly once, whatever the thread count. An
+/// exception from body stops the work and is rethrown on the calling thread once all have joined.
 template <class Body>
 void parallel_for(std::size_t n, unsigned threads, std::size_t chunk, Body&& body) {
   const unsigned workers = static_cast<unsigned>(
@@ -25,18 +28,59 @@ void parallel_for(std::size_t n, unsigned threads, std::size_t chunk, Body&& bod
     return;
   }
   std::atomic<std::size_t> next{0};
+  std::vector<std::exception_ptr> errors(workers);
   auto run = [&](unsigned worker) {
-    for (;;) {
-      const std::size_t begin = next.fetch_add(chunk);
-      if (begin >= n) return;
-      body(begin, std::min(n, begin + chunk), worker);
+    try {
+      for (;;) {
+        const std::size_t begin = next.fetch_add(chunk);
+        if (begin >= n) return;
+        body(begin, std::min(n, begin + chunk), worker);
+      }
+    } catch (...) {
+      errors[worker] = std::current_exception();
+      next.store(n);  // the others stop at their next chunk
     }
   };
   std::vector<std::thread> pool;
   pool.reserve(workers - 1);
-  for (unsigned w = 1; w < workers; ++w) pool.emplace_back(run, w);
+  try {
+    for (unsigned w = 1; w < workers; ++w) pool.emplace_back(run, w);
+  } catch (const std::system_error&) {
+    // No more threads to be had: the ones started and this one share the work.
+  }
   run(0);
   for (auto& t : pool) t.join();
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);  // the first error, on the calling thread
+}
+
+/// Runs left() on another thread and right() on this one; an exception from either is rethrown
+/// here after both have finished. Without a thread to be had, runs both here.
+template <class Left, class Right>
+void fork_join(Left&& left, Right&& right) {
+  std::exception_ptr left_error;
+  std::thread worker;
+  try {
+    worker = std::thread([&] {
+      try {
+        left();
+      } catch (...) {
+        left_error = std::current_exception();
+      }
+    });
+  } catch (const std::system_error&) {
+    left();
+    right();
+    return;
+  }
+  try {
+    right();
+  } catch (...) {
+    worker.join();
+    throw;
+  }
+  worker.join();
+  if (left_error) std::rethrow_exception(left_error);
 }
 
 }  // namespace kdspace::detail

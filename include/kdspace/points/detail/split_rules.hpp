@@ -77,9 +77,8 @@ struct MedianPosition {
       T key;
       std::uint32_t index;
     };
-    thread_local std::vector<Keyed> keyed;
     const std::size_t n = static_cast<std::size_t>(in.last - in.first);
-    keyed.resize(n);
+    std::vector<Keyed> keyed(n);
     for (std::size_t i = 0; i < n; ++i) keyed[i] = {in.coord(in.first[i], axis), in.first[i]};
     auto mid = keyed.begin() + static_cast<std::ptrdiff_t>(n / 2);
     std::nth_element(keyed.begin(), mid, keyed.end(), [](const Keyed& a, const Keyed& b) { return a.key < b.key; });
@@ -95,11 +94,17 @@ std::size_t partition_below(const SplitInput<T>& in, std::size_t axis, T plane) 
   return static_cast<std::size_t>(cut - in.first);
 }
 
+/// The middle of [lo, hi], without overflow when hi - lo exceeds the largest finite value.
+template <class T>
+T middle_of(T lo, T hi) {
+  return lo / 2 + hi / 2;
+}
+
 /// Spatial middle of the cell; one side may be empty (the search never enters an empty child).
 struct MiddlePosition {
   template <class T>
   static Partition<T> split(const SplitInput<T>& in, std::size_t axis) {
-    const T plane = in.cell_lo[axis] + (in.cell_hi[axis] - in.cell_lo[axis]) / 2;
+    const T plane = middle_of(in.cell_lo[axis], in.cell_hi[axis]);
     return {partition_below(in, axis, plane), plane};
   }
 };
@@ -109,7 +114,7 @@ struct MiddlePosition {
 struct SlidingMidpointPosition {
   template <class T>
   static Partition<T> split(const SplitInput<T>& in, std::size_t axis) {
-    T plane = in.cell_lo[axis] + (in.cell_hi[axis] - in.cell_lo[axis]) / 2;
+    T plane = middle_of(in.cell_lo[axis], in.cell_hi[axis]);
     // The axis is not flat, so point_lo < point_hi and each slid partition leaves both sides non-empty.
     if (plane <= in.point_lo[axis]) {
       plane = in.point_lo[axis];  // everything is right of the middle: keep the lowest points left
