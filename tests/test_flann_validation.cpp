@@ -36,6 +36,7 @@
 #include "kdspace/metric.hpp"
 #include "kdspace/points/brute_force.hpp"
 #include "kdspace/points/point_tree.hpp"
+#include "support.hpp"
 
 using kdspace::AxisRule;
 using kdspace::BuildParams;
@@ -46,93 +47,17 @@ using kdspace::PositionRule;
 
 namespace {
 
-// ---- data (the generators of test_point_tree_exact.cpp, restricted to the shapes FLANN is fed) ------
+// ---- data (the generators shared with test_point_tree_exact.cpp, in support.hpp; FLANN is fed four shapes)
 
-enum class Shape { uniform, clustered, duplicates, grid };
-
-const char* name(Shape s) {
-  switch (s) {
-    case Shape::uniform:
-      return "uniform";
-    case Shape::clustered:
-      return "clustered";
-    case Shape::duplicates:
-      return "duplicate-heavy";
-    case Shape::grid:
-      return "integer grid";
-  }
-  return "?";
-}
-
-const char* name(AxisRule a) {
-  return a == AxisRule::cycle ? "cycle" : "max_spread";
-}
-
-const char* name(PositionRule p) {
-  switch (p) {
-    case PositionRule::median:
-      return "median";
-    case PositionRule::middle:
-      return "middle";
-    case PositionRule::sliding_midpoint:
-      return "sliding_midpoint";
-  }
-  return "?";
-}
-
-template <class T>
-const char* type_name() {
-  return sizeof(T) == sizeof(float) ? "float" : "double";
-}
+using kdspace_test::make_points;
+using kdspace_test::name;
+using kdspace_test::Shape;
+using kdspace_test::type_name;
 
 std::string describe(const BuildParams& p) {
   std::ostringstream out;
   out << "axis=" << name(p.axis) << " position=" << name(p.position) << " leaf_size=" << p.leaf_size;
   return out.str();
-}
-
-template <class T>
-std::vector<T> make_points(Shape shape, std::size_t n, std::size_t dim, std::uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> unit(-1.0, 1.0);
-  std::vector<T> pts(n * dim);
-  switch (shape) {
-    case Shape::uniform:
-      for (auto& v : pts) v = static_cast<T>(unit(rng));
-      break;
-    case Shape::clustered: {
-      const std::size_t blobs = 6;
-      std::vector<double> centres(blobs * dim);
-      for (auto& c : centres) c = 10.0 * unit(rng);
-      const double sigma[blobs] = {0.01, 0.05, 0.1, 0.2, 0.3, 0.02};
-      std::discrete_distribution<std::size_t> pick({1, 2, 4, 8, 16, 32});
-      for (std::size_t i = 0; i < n; ++i) {
-        const std::size_t b = pick(rng);
-        std::normal_distribution<double> noise(0.0, sigma[b]);
-        for (std::size_t a = 0; a < dim; ++a)
-          pts[i * dim + a] = static_cast<T>(centres[b * dim + a] + noise(rng));
-      }
-      break;
-    }
-    case Shape::duplicates: {
-      const std::size_t pool = 16;
-      std::vector<T> distinct(pool * dim);
-      for (auto& v : distinct) v = static_cast<T>(unit(rng));
-      std::uniform_int_distribution<std::size_t> pick(0, pool - 1);
-      for (std::size_t i = 0; i < n; ++i) {
-        const std::size_t p = pick(rng);
-        std::copy_n(distinct.begin() + static_cast<std::ptrdiff_t>(p * dim), dim,
-                    pts.begin() + static_cast<std::ptrdiff_t>(i * dim));
-      }
-      break;
-    }
-    case Shape::grid: {
-      std::uniform_int_distribution<int> cell(0, 6);
-      for (auto& v : pts) v = static_cast<T>(cell(rng));
-      break;
-    }
-  }
-  return pts;
 }
 
 /// Queries cycling through: random in the bounding box grown by 10% (integers for grid data), on a

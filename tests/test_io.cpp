@@ -14,6 +14,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/io/vectors.hpp"
+#include "support.hpp"
 
 namespace fs = std::filesystem;
 using Catch::Contains;
@@ -25,22 +26,9 @@ namespace io = kdspace::io;
 namespace {
 
 // A scratch directory for one test, removed afterwards.
-class TempDir {
+class TempDir : public kdspace_test::ScratchDir {
  public:
-  TempDir() : dir_(fs::temp_directory_path() / ("kdspace-io-test-" + std::to_string(::getpid()))) {
-    fs::create_directories(dir_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-
-  std::string file(const std::string& name) const { return (dir_ / name).string(); }
-
- private:
-  fs::path dir_;
+  TempDir() : ScratchDir("kdspace-io-test-") {}
 };
 
 // Little-endian bytes for hand-made files.

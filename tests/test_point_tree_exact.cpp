@@ -30,6 +30,7 @@
 #include "kdspace/metric.hpp"
 #include "kdspace/points/brute_force.hpp"
 #include "kdspace/points/point_tree.hpp"
+#include "support.hpp"
 
 using kdspace::AxisRule;
 using kdspace::BuildParams;
@@ -44,130 +45,16 @@ namespace {
 
 // ---- data ---------------------------------------------------------------------------------------
 
-enum class Shape { uniform, clustered, duplicates, grid, identical, flat, sorted_x };
-
-const char* name(Shape s) {
-  switch (s) {
-    case Shape::uniform:
-      return "uniform";
-    case Shape::clustered:
-      return "clustered";
-    case Shape::duplicates:
-      return "duplicate-heavy";
-    case Shape::grid:
-      return "integer grid";
-    case Shape::identical:
-      return "all identical";
-    case Shape::flat:
-      return "flat axes";
-    case Shape::sorted_x:
-      return "sorted along x";
-  }
-  return "?";
-}
-
-const char* name(AxisRule a) {
-  return a == AxisRule::cycle ? "cycle" : "max_spread";
-}
-
-const char* name(PositionRule p) {
-  switch (p) {
-    case PositionRule::median:
-      return "median";
-    case PositionRule::middle:
-      return "middle";
-    case PositionRule::sliding_midpoint:
-      return "sliding_midpoint";
-  }
-  return "?";
-}
-
-template <class T>
-const char* type_name() {
-  return sizeof(T) == sizeof(float) ? "float" : "double";
-}
+using kdspace_test::make_points;
+using kdspace_test::name;
+using kdspace_test::Shape;
+using kdspace_test::type_name;
 
 std::string describe(const BuildParams& p) {
   std::ostringstream out;
   out << "axis=" << name(p.axis) << " position=" << name(p.position) << " leaf_size=" << p.leaf_size
       << " max_depth=" << p.max_depth;
   return out.str();
-}
-
-/// n points of `dim` coordinates, row-major, of the given shape; the same seed gives the same points.
-template <class T>
-std::vector<T> make_points(Shape shape, std::size_t n, std::size_t dim, std::uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> unit(-1.0, 1.0);
-  std::vector<T> pts(n * dim);
-  switch (shape) {
-    case Shape::uniform:
-      for (auto& v : pts) v = static_cast<T>(unit(rng));
-      break;
-    case Shape::clustered: {
-      // Six Gaussian blobs of very different weights and widths, centres spread over [-10, 10].
-      const std::size_t blobs = 6;
-      std::vector<double> centres(blobs * dim);
-      for (auto& c : centres) c = 10.0 * unit(rng);
-      const double sigma[blobs] = {0.01, 0.05, 0.1, 0.2, 0.3, 0.02};
-      std::discrete_distribution<std::size_t> pick({1, 2, 4, 8, 16, 32});
-      for (std::size_t i = 0; i < n; ++i) {
-        const std::size_t b = pick(rng);
-        std::normal_distribution<double> noise(0.0, sigma[b]);
-        for (std::size_t a = 0; a < dim; ++a)
-          pts[i * dim + a] = static_cast<T>(centres[b * dim + a] + noise(rng));
-      }
-      break;
-    }
-    case Shape::duplicates: {
-      // Every point is one of 16 distinct points.
-      const std::size_t pool = 16;
-      std::vector<T> distinct(pool * dim);
-      for (auto& v : distinct) v = static_cast<T>(unit(rng));
-      std::uniform_int_distribution<std::size_t> pick(0, pool - 1);
-      for (std::size_t i = 0; i < n; ++i) {
-        const std::size_t p = pick(rng);
-        std::copy_n(distinct.begin() + static_cast<std::ptrdiff_t>(p * dim), dim,
-                    pts.begin() + static_cast<std::ptrdiff_t>(i * dim));
-      }
-      break;
-    }
-    case Shape::grid: {
-      std::uniform_int_distribution<int> cell(0, 6);
-      for (auto& v : pts) v = static_cast<T>(cell(rng));
-      break;
-    }
-    case Shape::identical: {
-      std::vector<T> p(dim);
-      for (auto& v : p) v = static_cast<T>(unit(rng));
-      for (std::size_t i = 0; i < n; ++i)
-        std::copy(p.begin(), p.end(), pts.begin() + static_cast<std::ptrdiff_t>(i * dim));
-      break;
-    }
-    case Shape::flat:
-      // Uniform, but every third axis (1, 4, 7, ...) is constant, and from 8-D on the last one too.
-      for (std::size_t i = 0; i < n; ++i)
-        for (std::size_t a = 0; a < dim; ++a) {
-          T v = static_cast<T>(unit(rng));
-          if (a % 3 == 1) v = T(0.25);
-          if (dim >= 8 && a + 1 == dim) v = T(-3);
-          pts[i * dim + a] = v;
-        }
-      break;
-    case Shape::sorted_x: {
-      std::vector<T> raw(n * dim);
-      for (auto& v : raw) v = static_cast<T>(unit(rng));
-      std::vector<std::size_t> order(n);
-      std::iota(order.begin(), order.end(), std::size_t{0});
-      std::stable_sort(order.begin(), order.end(),
-                       [&](std::size_t i, std::size_t j) { return raw[i * dim] < raw[j * dim]; });
-      for (std::size_t i = 0; i < n; ++i)
-        std::copy_n(raw.begin() + static_cast<std::ptrdiff_t>(order[i] * dim), dim,
-                    pts.begin() + static_cast<std::ptrdiff_t>(i * dim));
-      break;
-    }
-  }
-  return pts;
 }
 
 enum class QueryKind { random, on_point, far };

@@ -25,6 +25,7 @@
 #include "kdspace/rays/box_tree.hpp"
 #include "kdspace/rays/brute_force.hpp"
 #include "kdspace/rays/scene_gen.hpp"
+#include "support.hpp"
 
 using kdspace::Box3f;
 using kdspace::BoxBuildMethod;
@@ -90,21 +91,10 @@ std::string describe(const Ray& r) {
 
 // ---- scenes -------------------------------------------------------------------------------------
 
-using Rng = std::mt19937;
-
-float uniform(Rng& rng, float lo, float hi) {
-  return std::uniform_real_distribution<float>(lo, hi)(rng);
-}
-int uniform_int(Rng& rng, int lo, int hi) {
-  return std::uniform_int_distribution<int>(lo, hi)(rng);
-}
-
-Box3f box_of(float x0, float y0, float z0, float x1, float y1, float z1) {
-  Box3f b;
-  b.lo = {x0, y0, z0};
-  b.hi = {x1, y1, z1};
-  return b;
-}
+using kdspace_test::box_of;
+using kdspace_test::Rng;
+using kdspace_test::uniform;
+using kdspace_test::uniform_int;
 
 /// Boxes of very different sizes (spanning three orders of magnitude) in [-10, 10]^3.
 std::vector<Box3f> mixed_scale_boxes(std::size_t n, Rng& rng) {

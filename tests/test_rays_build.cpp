@@ -12,6 +12,7 @@
 
 #include "kdspace/rays/box_tree.hpp"
 #include "kdspace/rays/scene_gen.hpp"
+#include "support.hpp"
 
 using kdspace::Box3f;
 using kdspace::BoxBuildMethod;
@@ -21,21 +22,10 @@ using kdspace::BoxTree;
 
 namespace {
 
-using Rng = std::mt19937;
-
-float uniform(Rng& rng, float lo, float hi) {
-  return std::uniform_real_distribution<float>(lo, hi)(rng);
-}
-int uniform_int(Rng& rng, int lo, int hi) {
-  return std::uniform_int_distribution<int>(lo, hi)(rng);
-}
-
-Box3f box_of(float x0, float y0, float z0, float x1, float y1, float z1) {
-  Box3f b;
-  b.lo = {x0, y0, z0};
-  b.hi = {x1, y1, z1};
-  return b;
-}
+using kdspace_test::box_of;
+using kdspace_test::Rng;
+using kdspace_test::uniform;
+using kdspace_test::uniform_int;
 
 /// Boxes snapped to a grid of 16 positions per axis, a quarter of them flat on a random axis: many
 /// coincident events, coplanar flat boxes and straddlers, the cases where two builds could differ.

@@ -16,6 +16,7 @@
 #include "kdspace/io/scene.hpp"
 #include "kdspace/rays/box_tree.hpp"
 #include "kdspace/rays/scene_gen.hpp"
+#include "support.hpp"
 
 namespace fs = std::filesystem;
 using Catch::Contains;
@@ -27,22 +28,9 @@ namespace io = kdspace::io;
 
 namespace {
 
-class TempDir {
+class TempDir : public kdspace_test::ScratchDir {
  public:
-  TempDir() : dir_(fs::temp_directory_path() / ("kdspace-rays-io-test-" + std::to_string(::getpid()))) {
-    fs::create_directories(dir_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-
-  std::string file(const std::string& name) const { return (dir_ / name).string(); }
-
- private:
-  fs::path dir_;
+  TempDir() : ScratchDir("kdspace-rays-io-test-") {}
 };
 
 /// Writes raw bytes: a uint64 header followed by floats, as a hand-made file.

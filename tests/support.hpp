@@ -1,0 +1,189 @@
+// Helpers shared by several test files (tests/test_*.cpp): data generators for the point-tree tests,
+// scene helpers for the ray tests, and a scratch directory for the file tests.
+#ifndef KDSPACE_TESTS_SUPPORT_HPP
+#define KDSPACE_TESTS_SUPPORT_HPP
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <numeric>
+#include <random>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include "kdspace/points/point_tree.hpp"
+#include "kdspace/rays/box_tree.hpp"
+
+namespace kdspace_test {
+
+using kdspace::AxisRule;
+using kdspace::PositionRule;
+
+// ---- point data (test_point_tree_exact.cpp, test_flann_validation.cpp) -----------------------------
+
+enum class Shape { uniform, clustered, duplicates, grid, identical, flat, sorted_x };
+
+inline const char* name(Shape s) {
+  switch (s) {
+    case Shape::uniform:
+      return "uniform";
+    case Shape::clustered:
+      return "clustered";
+    case Shape::duplicates:
+      return "duplicate-heavy";
+    case Shape::grid:
+      return "integer grid";
+    case Shape::identical:
+      return "all identical";
+    case Shape::flat:
+      return "flat axes";
+    case Shape::sorted_x:
+      return "sorted along x";
+  }
+  return "?";
+}
+
+inline const char* name(AxisRule a) {
+  return a == AxisRule::cycle ? "cycle" : "max_spread";
+}
+
+inline const char* name(PositionRule p) {
+  switch (p) {
+    case PositionRule::median:
+      return "median";
+    case PositionRule::middle:
+      return "middle";
+    case PositionRule::sliding_midpoint:
+      return "sliding_midpoint";
+  }
+  return "?";
+}
+
+template <class T>
+const char* type_name() {
+  return sizeof(T) == sizeof(float) ? "float" : "double";
+}
+
+/// n points of `dim` coordinates, row-major, of the given shape; the same seed gives the same points.
+template <class T>
+std::vector<T> make_points(Shape shape, std::size_t n, std::size_t dim, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::vector<T> pts(n * dim);
+  switch (shape) {
+    case Shape::uniform:
+      for (auto& v : pts) v = static_cast<T>(unit(rng));
+      break;
+    case Shape::clustered: {
+      // Six Gaussian blobs of very different weights and widths, centres spread over [-10, 10].
+      const std::size_t blobs = 6;
+      std::vector<double> centres(blobs * dim);
+      for (auto& c : centres) c = 10.0 * unit(rng);
+      const double sigma[blobs] = {0.01, 0.05, 0.1, 0.2, 0.3, 0.02};
+      std::discrete_distribution<std::size_t> pick({1, 2, 4, 8, 16, 32});
+      for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t b = pick(rng);
+        std::normal_distribution<double> noise(0.0, sigma[b]);
+        for (std::size_t a = 0; a < dim; ++a)
+          pts[i * dim + a] = static_cast<T>(centres[b * dim + a] + noise(rng));
+      }
+      break;
+    }
+    case Shape::duplicates: {
+      // Every point is one of 16 distinct points.
+      const std::size_t pool = 16;
+      std::vector<T> distinct(pool * dim);
+      for (auto& v : distinct) v = static_cast<T>(unit(rng));
+      std::uniform_int_distribution<std::size_t> pick(0, pool - 1);
+      for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t p = pick(rng);
+        std::copy_n(distinct.begin() + static_cast<std::ptrdiff_t>(p * dim), dim,
+                    pts.begin() + static_cast<std::ptrdiff_t>(i * dim));
+      }
+      break;
+    }
+    case Shape::grid: {
+      std::uniform_int_distribution<int> cell(0, 6);
+      for (auto& v : pts) v = static_cast<T>(cell(rng));
+      break;
+    }
+    case Shape::identical: {
+      std::vector<T> p(dim);
+      for (auto& v : p) v = static_cast<T>(unit(rng));
+      for (std::size_t i = 0; i < n; ++i)
+        std::copy(p.begin(), p.end(), pts.begin() + static_cast<std::ptrdiff_t>(i * dim));
+      break;
+    }
+    case Shape::flat:
+      // Uniform, but every third axis (1, 4, 7, ...) is constant, and from 8-D on the last one too.
+      for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t a = 0; a < dim; ++a) {
+          T v = static_cast<T>(unit(rng));
+          if (a % 3 == 1) v = T(0.25);
+          if (dim >= 8 && a + 1 == dim) v = T(-3);
+          pts[i * dim + a] = v;
+        }
+      break;
+    case Shape::sorted_x: {
+      std::vector<T> raw(n * dim);
+      for (auto& v : raw) v = static_cast<T>(unit(rng));
+      std::vector<std::size_t> order(n);
+      std::iota(order.begin(), order.end(), std::size_t{0});
+      std::stable_sort(order.begin(), order.end(),
+                       [&](std::size_t i, std::size_t j) { return raw[i * dim] < raw[j * dim]; });
+      for (std::size_t i = 0; i < n; ++i)
+        std::copy_n(raw.begin() + static_cast<std::ptrdiff_t>(order[i] * dim), dim,
+                    pts.begin() + static_cast<std::ptrdiff_t>(i * dim));
+      break;
+    }
+  }
+  return pts;
+}
+
+// ---- scenes (test_rays.cpp, test_rays_build.cpp) ------------------------------------------------
+
+using Rng = std::mt19937;
+
+inline float uniform(Rng& rng, float lo, float hi) {
+  return std::uniform_real_distribution<float>(lo, hi)(rng);
+}
+inline int uniform_int(Rng& rng, int lo, int hi) {
+  return std::uniform_int_distribution<int>(lo, hi)(rng);
+}
+
+inline kdspace::Box3f box_of(float x0, float y0, float z0, float x1, float y1, float z1) {
+  kdspace::Box3f b;
+  b.lo = {x0, y0, z0};
+  b.hi = {x1, y1, z1};
+  return b;
+}
+
+// ---- files (test_io.cpp, test_rays_io.cpp) ------------------------------------------------------
+
+/// A scratch directory for one test, removed afterwards: <temp>/<prefix><process id>.
+class ScratchDir {
+ public:
+  explicit ScratchDir(const std::string& prefix)
+      : dir_(std::filesystem::temp_directory_path() / (prefix + std::to_string(::getpid()))) {
+    std::filesystem::create_directories(dir_);
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(dir_, ec);
+  }
+  ScratchDir(const ScratchDir&) = delete;
+  ScratchDir& operator=(const ScratchDir&) = delete;
+
+  std::string file(const std::string& name) const { return (dir_ / name).string(); }
+
+ private:
+  std::filesystem::path dir_;
+};
+
+}  // namespace kdspace_test
+
+#endif  // KDSPACE_TESTS_SUPPORT_HPP
