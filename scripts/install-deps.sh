@@ -6,9 +6,11 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config git python3  # toolchain
   libpng-dev                                                 # kdspace render
-  catch2 libeigen3-dev                                       # tests
+  libeigen3-dev                                              # the blocked scan (library)
+  catch2                                                     # tests
   libflann-dev liblz4-dev                                    # FLANN: validation tests and benchmarks
   libnanoflann-dev libembree-dev                             # benchmark peers
+  gnuplot-nox                                                # benchmark plots
 )
 
 missing=()

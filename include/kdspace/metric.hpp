@@ -66,21 +66,27 @@ struct Linf {
 
 /// The internal distance between two points of `dim` coordinates.
 ///
-/// This one function is used by the tree, by brute_force_knn and by the tests, always in the same
-/// order of operations, so "exact" can be checked bit for bit. Four independent accumulators (lane
-/// j takes axes j, j+4, ...) let the compiler keep several additions in flight.
+/// This one function is used by the tree, by brute_force_knn, by the blocked scan's re-check and by
+/// the tests, always in the same order of operations, so "exact" can be checked bit for bit. From 8
+/// coordinates on, lane j of 8 independent accumulators takes axes j, j+8, j+16, ... and the lanes
+/// are combined pairwise in a fixed order: the lanes are independent, so the compiler keeps them in
+/// vector registers (the order of the additions, hence the result, is the same with or without
+/// vector instructions). The remaining axes, and all of them below 8, are added one by one.
 template <class Metric, class T>
 inline T internal_distance(const T* a, const T* b, std::size_t dim) {
-  T acc0 = 0, acc1 = 0, acc2 = 0, acc3 = 0;
+  constexpr std::size_t lanes = 8;
+  T total = 0;
   std::size_t i = 0;
-  for (; i + 4 <= dim; i += 4) {
-    acc0 = Metric::accumulate(acc0, Metric::term(a[i] - b[i]));
-    acc1 = Metric::accumulate(acc1, Metric::term(a[i + 1] - b[i + 1]));
-    acc2 = Metric::accumulate(acc2, Metric::term(a[i + 2] - b[i + 2]));
-    acc3 = Metric::accumulate(acc3, Metric::term(a[i + 3] - b[i + 3]));
+  if (dim >= lanes) {
+    T acc[lanes] = {};
+    for (; i + lanes <= dim; i += lanes)
+      for (std::size_t j = 0; j < lanes; ++j) acc[j] = Metric::accumulate(acc[j], Metric::term(a[i + j] - b[i + j]));
+    for (std::size_t width = lanes / 2; width > 0; width /= 2)
+      for (std::size_t j = 0; j < width; ++j) acc[j] = Metric::accumulate(acc[j], acc[j + width]);
+    total = acc[0];
   }
-  for (; i < dim; ++i) acc0 = Metric::accumulate(acc0, Metric::term(a[i] - b[i]));
-  return Metric::accumulate(Metric::accumulate(acc0, acc1), Metric::accumulate(acc2, acc3));
+  for (; i < dim; ++i) total = Metric::accumulate(total, Metric::term(a[i] - b[i]));
+  return total;
 }
 
 }  // namespace kdspace

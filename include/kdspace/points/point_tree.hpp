@@ -27,6 +27,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/metric.hpp"
+#include "kdspace/points/detail/blocked_scan.hpp"
 #include "kdspace/points/detail/builder.hpp"
 #include "kdspace/points/detail/node.hpp"
 #include "kdspace/points/detail/parallel.hpp"
@@ -150,14 +151,34 @@ class PointTree {
     for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
     out.neighbors.resize(nq * k);
     std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
-    detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
-      std::vector<detail::Candidate<T>> scratch;
-      for (std::size_t q = begin; q < end; ++q) {
-        detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
-        run(queries + q * dim(), results, params, per_worker[worker]);
-        write(results.sorted(), out.neighbors.data() + q * k);
-      }
-    });
+    auto by_tree = [&](std::size_t first, std::size_t last) {
+      detail::parallel_for(last - first, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
+        std::vector<detail::Candidate<T>> scratch;
+        for (std::size_t q = first + begin; q < first + end; ++q) {
+          detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
+          run(queries + q * dim(), results, params, per_worker[worker]);
+          write(results.sorted(), out.neighbors.data() + q * k);
+        }
+      });
+    };
+    const bool exact = params.eps == 0 && params.max_checks == std::numeric_limits<std::size_t>::max();
+    std::size_t first_scanned = nq;  // queries from here on are answered by the scan
+    if (exact && params.batch_method == BatchMethod::scan) {
+      first_scanned = 0;
+    } else if (exact && params.batch_method == BatchMethod::automatic && std::is_same_v<Metric, L2> &&
+               nq > 2 * probe_queries) {
+      // The first queries by the tree; the share of the points they scored decides the rest.
+      // Always the same queries, so the choice does not depend on the thread count.
+      by_tree(0, probe_queries);
+      QueryStats probe;
+      sum_stats(per_worker, &probe);
+      const double scored = static_cast<double>(probe.points_visited) / static_cast<double>(probe_queries * size());
+      first_scanned = scored >= scan_switch_fraction ? probe_queries : nq;
+      if (first_scanned == nq) by_tree(probe_queries, nq);
+    } else {
+      by_tree(0, nq);
+    }
+    if (first_scanned < nq) scan_batch(queries, first_scanned, nq, k, out.neighbors.data(), threads, per_worker);
     sum_stats(per_worker, stats);
     return out;
   }
@@ -261,6 +282,8 @@ class PointTree {
     nodes_ = std::move(built.nodes);
     points_ = std::move(built.points);
     order_ = std::move(built.order);
+    centre_.resize(d);
+    for (std::size_t a = 0; a < d; ++a) centre_[a] = root_lo_[a] / 2 + root_hi_[a] / 2;  // no overflow
     depth_ = built.depth;
     leaves_ = built.leaves;
     nodes_.shrink_to_fit();
@@ -376,6 +399,30 @@ class PointTree {
     }
   }
 
+  // Queries [first, last) by scoring every point (BatchMethod::scan), spread over threads.
+  void scan_batch(const T* queries, std::size_t first, std::size_t last, std::size_t k, Neighbor<T>* out,
+                  unsigned threads, std::vector<QueryStats>& per_worker) const {
+    const std::size_t d = dim();
+    detail::parallel_for(last - first, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
+      const std::size_t q0 = first + begin, count = end - begin;
+      if constexpr (std::is_same_v<Metric, L2>) {
+        const detail::ScanData<T> data{points_.data(), order_.data(), size(), d, centre_.data()};
+        detail::blocked_scan_knn_l2(data, queries + q0 * d, count, k, out + q0 * k);
+      } else {
+        std::vector<detail::Candidate<T>> scratch;
+        for (std::size_t q = q0; q < q0 + count; ++q) {
+          detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
+          const T* p = points_.data();
+          for (std::size_t i = 0; i < size(); ++i, p += d)
+            results.offer(internal_distance<Metric>(queries + q * d, p, d), order_[i]);
+          write(results.sorted(), out + q * k);
+        }
+      }
+      per_worker[worker].queries += count;
+      per_worker[worker].points_visited += count * size();
+    });
+  }
+
   void search_box(std::uint32_t id, const T* lo, const T* hi, std::vector<Index>& found, QueryStats& stats) const {
     const Node& node = nodes_[id];
     ++stats.nodes_visited;
@@ -414,11 +461,15 @@ class PointTree {
     for (const auto& s : per_worker) *stats += s;
   }
 
+  // Queries of a batch the tree answers before BatchMethod::automatic chooses.
+  static constexpr std::size_t probe_queries = 16;
+
   std::size_t dim_;
   std::vector<T> points_;             // leaf-ordered copy, row-major
   std::vector<std::uint32_t> order_;  // original index of each leaf-ordered point
   std::vector<Node> nodes_;           // depth first; nodes_[0] is the root
   std::vector<T> root_lo_, root_hi_;  // bounds of all points
+  std::vector<T> centre_;             // middle of those bounds: the origin of the blocked scan
   std::size_t depth_ = 0;
   std::size_t leaves_ = 0;
   T prune_margin_ = 1;

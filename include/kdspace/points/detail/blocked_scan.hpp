@@ -1,0 +1,44 @@
+// The blocked scan: exact L2 k-NN of many queries by scoring every point, for data where a kd-tree
+// would visit most leaves anyway (high dimensions, uniform data).
+//
+// Squared distances are first estimated as |x|^2 + |q|^2 - 2 x.q, with the dot products of a block
+// of points against a block of queries computed as one matrix product (Eigen, compiled in the
+// library: lib/points/blocked_scan.cpp), on coordinates centred on `centre` so that the norms stay
+// small. Each estimate a comes with a rigorous rounding bound m (the product's and the norms'
+// rounding, the centring's and that of internal_distance() itself), so that the exact internal
+// distance lies in [a - m, a + m]. A point is kept as a candidate unless a - m exceeds the k-th
+// smallest a + m seen so far; the candidates are then scored again with internal_distance() and
+// ranked by (distance, index). The answer is therefore the tree's and brute_force_knn()'s, bit for
+// bit, whatever the rounding of the product.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "kdspace/points/neighbor.hpp"
+
+namespace kdspace::detail {
+
+/// The points as the tree holds them: leaf-ordered rows and each row's original index.
+template <class T>
+struct ScanData {
+  const T* points;              ///< n rows of dim coordinates
+  const std::uint32_t* order;   ///< original index of each row
+  std::size_t n;
+  std::size_t dim;
+  const T* centre;              ///< dim coordinates near the middle of the data
+};
+
+/// Exact k-NN (L2, 1 <= k <= n) of queries[0 .. nq) (row-major); out[q * k + i] is the i-th
+/// neighbour of query q in (distance, index) order, distances true (not squared). One thread; the
+/// caller spreads blocks of queries over threads. Coordinates large enough for the estimate to
+/// overflow are answered by a plain exact scan instead.
+template <class T>
+void blocked_scan_knn_l2(const ScanData<T>& data, const T* queries, std::size_t nq, std::size_t k, Neighbor<T>* out);
+
+extern template void blocked_scan_knn_l2<float>(const ScanData<float>&, const float*, std::size_t, std::size_t,
+                                                Neighbor<float>*);
+extern template void blocked_scan_knn_l2<double>(const ScanData<double>&, const double*, std::size_t, std::size_t,
+                                                 Neighbor<double>*);
+
+}  // namespace kdspace::detail

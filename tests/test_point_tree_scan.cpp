@@ -1,0 +1,163 @@
+// The blocked scan (BatchMethod::scan, and the automatic switch to it): its answers must be those of
+// brute_force_knn bit for bit, on every data shape, in float and double, at every scale of the
+// coordinates (where the rounding bound of the matrix-product estimate is put to the test).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "kdspace/metric.hpp"
+#include "kdspace/points/brute_force.hpp"
+#include "kdspace/points/point_tree.hpp"
+#include "support.hpp"
+
+using kdspace::BatchMethod;
+using kdspace::Neighbor;
+using kdspace::PointTree;
+using kdspace::QueryStats;
+using kdspace::SearchParams;
+using kdspace_test::make_points;
+using kdspace_test::Shape;
+
+namespace {
+
+/// nq queries: random in the data's bounding box grown by a quarter, every third one a data point,
+/// every seventh far outside.
+template <class T>
+std::vector<T> make_queries(const std::vector<T>& pts, std::size_t n, std::size_t dim, std::size_t nq,
+                            std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::vector<T> lo(pts.begin(), pts.begin() + static_cast<std::ptrdiff_t>(dim)), hi = lo;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t a = 0; a < dim; ++a) {
+      lo[a] = std::min(lo[a], pts[i * dim + a]);
+      hi[a] = std::max(hi[a], pts[i * dim + a]);
+    }
+  std::vector<T> q(nq * dim);
+  for (std::size_t j = 0; j < nq; ++j) {
+    const std::size_t on = std::uniform_int_distribution<std::size_t>(0, n - 1)(rng);
+    for (std::size_t a = 0; a < dim; ++a) {
+      const double span = static_cast<double>(hi[a]) - static_cast<double>(lo[a]);
+      const double mid = static_cast<double>(lo[a]) / 2 + static_cast<double>(hi[a]) / 2;
+      double v = mid + std::uniform_real_distribution<double>(-0.625, 0.625)(rng) * span;
+      if (j % 3 == 1) v = static_cast<double>(pts[on * dim + a]);
+      if (j % 7 == 5) v = mid + 50 * (span + 1);
+      q[j * dim + a] = static_cast<T>(v);
+    }
+  }
+  return q;
+}
+
+/// Compares knn_batch(scan) with brute_force_knn for every query; returns the first difference.
+template <class T, class Metric>
+std::string scan_differs(const std::vector<T>& pts, std::size_t n, std::size_t dim, const std::vector<T>& queries,
+                         std::size_t k, unsigned threads, BatchMethod method = BatchMethod::scan) {
+  const PointTree<T, kdspace::Dynamic, Metric> tree(pts.data(), n, dim);
+  SearchParams sp;
+  sp.batch_method = method;
+  const std::size_t nq = queries.size() / dim;
+  const auto batch = tree.knn_batch(queries.data(), nq, k, sp, threads);
+  for (std::size_t q = 0; q < nq; ++q) {
+    const auto expected = kdspace::brute_force_knn<Metric>(pts.data(), n, dim, queries.data() + q * dim, k);
+    const auto row = batch.row(q);
+    if (row.size() != k) return "query " + std::to_string(q) + ": " + std::to_string(row.size()) + " results";
+    for (std::size_t i = 0; i < k; ++i)
+      if (!(row[i] == expected[i])) {
+        std::ostringstream out;
+        out.precision(10);
+        out << "query " << q << " rank " << i << ": got index " << row[i].index << " at " << row[i].distance
+            << ", brute force index " << expected[i].index << " at " << expected[i].distance;
+        return out.str();
+      }
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST_CASE("scan: knn_batch by the blocked scan equals brute force bit for bit on every shape, dimension and k",
+          "[points][exact][scan]") {
+  const Shape shape = GENERATE(Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid, Shape::identical,
+                               Shape::flat, Shape::sorted_x);
+  const std::size_t dim = GENERATE(as<std::size_t>{}, 1, 3, 8, 17, 64, 128);
+  const std::size_t n = GENERATE(as<std::size_t>{}, 1, 7, 1500);
+  const std::uint32_t seed = 900 + static_cast<std::uint32_t>(dim * 7 + n);
+  const auto pts = make_points<float>(shape, n, dim, seed);
+  const auto queries = make_queries(pts, n, dim, 150, seed + 1);
+  for (std::size_t k : {1, 2, 5, 10, 100}) {
+    if (k > n) continue;
+    INFO(kdspace_test::name(shape) << " n=" << n << " dim=" << dim << " k=" << k << " float");
+    CHECK(scan_differs<float, kdspace::L2>(pts, n, dim, queries, k, 2) == "");
+  }
+  const auto pts_d = make_points<double>(shape, n, dim, seed);
+  const auto queries_d = make_queries(pts_d, n, dim, 80, seed + 2);
+  INFO(kdspace_test::name(shape) << " n=" << n << " dim=" << dim << " k=" << std::min<std::size_t>(n, 10)
+                                 << " double");
+  CHECK(scan_differs<double, kdspace::L2>(pts_d, n, dim, queries_d, std::min<std::size_t>(n, 10), 1) == "");
+}
+
+TEST_CASE("scan: exact at every scale: far from the origin, tiny, huge and mixed coordinates",
+          "[points][exact][scan]") {
+  // Offsets make the norms large against the distances (the estimate's rounding bound is then wide);
+  // tiny coordinates reach the subnormal range; huge ones would overflow the estimate and must take
+  // the plain exact scan.
+  struct Scale {
+    double factor, offset;
+  };
+  const Scale scale = GENERATE(Scale{1, 1e4}, Scale{1e-3, 1e3}, Scale{1e-30, 0}, Scale{1e-42, 0}, Scale{1e18, 0},
+                               Scale{1e18, 1e19}, Scale{1, -3e5});
+  const std::size_t dim = GENERATE(as<std::size_t>{}, 2, 32, 128);
+  const std::size_t n = 1200;
+  auto pts = make_points<float>(Shape::clustered, n, dim, 77);
+  for (auto& v : pts) v = static_cast<float>(scale.offset + scale.factor * static_cast<double>(v));
+  const auto queries = make_queries(pts, n, dim, 100, 78);
+  INFO("scale " << scale.factor << " offset " << scale.offset << " dim " << dim);
+  for (std::size_t k : {1, 10, 50}) CHECK(scan_differs<float, kdspace::L2>(pts, n, dim, queries, k, 2) == "");
+}
+
+TEST_CASE("scan: forced scan under L1 and Linf equals brute force", "[points][exact][scan]") {
+  const std::size_t dim = GENERATE(as<std::size_t>{}, 3, 40);
+  const auto pts = make_points<float>(Shape::grid, 900, dim, 55);
+  const auto queries = make_queries(pts, 900, dim, 90, 56);
+  CHECK(scan_differs<float, kdspace::L1>(pts, 900, dim, queries, 7, 2) == "");
+  CHECK(scan_differs<float, kdspace::Linf>(pts, 900, dim, queries, 7, 2) == "");
+}
+
+TEST_CASE("scan: the automatic choice scans uniform 128-D data and keeps the tree on 3-D data",
+          "[points][exact][scan]") {
+  // In 128 dimensions an exact tree query scores nearly every point; in 3 it scores a few dozen.
+  auto points_scored = [](std::size_t dim, std::size_t nq) {
+    const std::size_t n = 4000;
+    const auto pts = make_points<float>(Shape::uniform, n, dim, 31);
+    const auto queries = make_queries(pts, n, dim, nq, 32);
+    const PointTree<float> tree(pts.data(), n, dim);
+    QueryStats stats;
+    const auto automatic = tree.knn_batch(queries.data(), nq, 10, {}, 2, &stats);
+    SearchParams by_tree;
+    by_tree.batch_method = BatchMethod::tree;
+    const auto reference = tree.knn_batch(queries.data(), nq, 10, by_tree, 1);
+    CHECK(automatic.neighbors == reference.neighbors);
+    CHECK(stats.queries == nq);
+    return static_cast<double>(stats.points_visited) / static_cast<double>(nq * n);
+  };
+  // The first 16 queries go to the tree; the rest score all points.
+  CHECK(points_scored(128, 200) > 0.95);
+  CHECK(points_scored(3, 200) < 0.05);
+  // A batch too small to probe stays on the tree, and is exact all the same.
+  CHECK(points_scored(128, 20) > 0.0);
+}
+
+TEST_CASE("scan: results do not depend on the thread count", "[points][exact][scan][threads]") {
+  const auto pts = make_points<float>(Shape::clustered, 2000, 96, 5);
+  const auto queries = make_queries(pts, 2000, 96, 333, 6);
+  const PointTree<float> tree(pts.data(), 2000, 96);
+  SearchParams sp;
+  sp.batch_method = BatchMethod::scan;
+  const auto one = tree.knn_batch(queries.data(), 333, 10, sp, 1);
+  for (unsigned threads : {2u, 3u, 8u}) CHECK(tree.knn_batch(queries.data(), 333, 10, sp, threads).neighbors == one.neighbors);
+}
