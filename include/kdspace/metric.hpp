@@ -75,17 +75,20 @@ struct Linf {
 template <class Metric, class T>
 inline T internal_distance(const T* a, const T* b, std::size_t dim) {
   constexpr std::size_t lanes = 8;
+  const std::size_t blocks = dim / lanes;
   T total = 0;
-  std::size_t i = 0;
-  if (dim >= lanes) {
+  if (blocks > 0) {
     T acc[lanes] = {};
-    for (; i + lanes <= dim; i += lanes)
-      for (std::size_t j = 0; j < lanes; ++j) acc[j] = Metric::accumulate(acc[j], Metric::term(a[i + j] - b[i + j]));
+    for (std::size_t block = 0; block < blocks; ++block) {
+      const T* x = a + block * lanes;
+      const T* y = b + block * lanes;
+      for (std::size_t j = 0; j < lanes; ++j) acc[j] = Metric::accumulate(acc[j], Metric::term(x[j] - y[j]));
+    }
     for (std::size_t width = lanes / 2; width > 0; width /= 2)
       for (std::size_t j = 0; j < width; ++j) acc[j] = Metric::accumulate(acc[j], acc[j + width]);
     total = acc[0];
   }
-  for (; i < dim; ++i) total = Metric::accumulate(total, Metric::term(a[i] - b[i]));
+  for (std::size_t i = blocks * lanes; i < dim; ++i) total = Metric::accumulate(total, Metric::term(a[i] - b[i]));
   return total;
 }
 

@@ -25,9 +25,13 @@ struct BuiltTree {
   std::size_t leaves = 0;
 };
 
-/// Splits nodes recursively. It works on a copy of the points that it reorders as it goes, so that
-/// every node's points are contiguous: scans and selections read memory in order, and the copy ends
-/// up in leaf order, ready for the search.
+/// Splits nodes recursively. Every node's points are contiguous rows [begin, end) of one of two
+/// buffers: a split reads them from one buffer and writes them, reordered left then right, into the
+/// same rows of the other, working out both children's bounds in that one pass. The levels thus
+/// alternate between the buffers; a leaf whose rows sit in the spare buffer copies them back, so the
+/// result ends up in leaf order in the first. All scratch (spare buffer, indices, keys) is allocated
+/// once, and nodes built at the same time own disjoint rows of it, so subtrees near the root are
+/// built on several threads without locks.
 template <class T, class AxisRule, class PositionRule>
 class Builder {
  public:
@@ -39,13 +43,18 @@ class Builder {
     tree.points.assign(coords_, coords_ + n_ * dim_);
     tree.order.resize(n_);
     for (std::size_t i = 0; i < n_; ++i) tree.order[i] = static_cast<std::uint32_t>(i);
-    points_ = tree.points.data();
-    order_ = tree.order.data();
+    buffers_[0] = {tree.points.data(), tree.order.data()};
+    spare_points_.resize(n_ * dim_);
+    spare_order_.resize(n_);
+    buffers_[1] = {spare_points_.data(), spare_order_.data()};
+    local_.resize(n_);
+    keyed_.resize(n_);
     std::vector<T> cell_lo(root_lo, root_lo + dim_), cell_hi(root_hi, root_hi + dim_);
+    std::vector<T> point_lo = cell_lo, point_hi = cell_hi;
     const unsigned threads = resolve_threads(params_.threads);
     std::size_t parallel_levels = 0;  // levels whose two subtrees are built on two threads
     while ((std::size_t{1} << parallel_levels) < threads && parallel_levels < 8) ++parallel_levels;
-    Subtree sub = build_node(0, n_, 0, cell_lo, cell_hi, parallel_levels);
+    Subtree sub = build_node(NodeRange{0, n_, 0, 0}, cell_lo, cell_hi, point_lo, point_hi, parallel_levels);
     tree.nodes = std::move(sub.nodes);
     tree.depth = sub.depth;
     for (const auto& node : tree.nodes) tree.leaves += node.is_leaf() ? 1 : 0;
@@ -57,101 +66,109 @@ class Builder {
     std::vector<PointNode<T>> nodes;  // links of inner nodes are relative to nodes[0]
     std::size_t depth = 0;
   };
+  struct Buffer {
+    T* points;
+    std::uint32_t* order;
+  };
+  /// A node's rows [begin, end), its depth, and the buffer (0 or 1) that holds them.
+  struct NodeRange {
+    std::size_t begin, end, depth;
+    int buffer;
+  };
 
-  T* row(std::size_t i) const { return points_ + i * dim_; }
+  T* row(int buffer, std::size_t i) const { return buffers_[buffer].points + i * dim_; }
 
-  // Builds the node for points [begin, end) into a vector of its own; `cell_*` are taken by value as
-  // each child narrows one axis of them.
-  Subtree build_node(std::size_t begin, std::size_t end, std::size_t depth, std::vector<T> cell_lo,
-                     std::vector<T> cell_hi, std::size_t parallel_levels) const {
+  // Builds the node into a vector of its own (for a subtree built on another thread).
+  Subtree build_node(const NodeRange& r, std::vector<T> cell_lo, std::vector<T> cell_hi, const std::vector<T>& point_lo,
+                     const std::vector<T>& point_hi, std::size_t parallel_levels) const {
     Subtree out;
-    append_node(out, begin, end, depth, cell_lo, cell_hi, parallel_levels);
+    append_node(out, r, cell_lo, cell_hi, point_lo, point_hi, parallel_levels);
     return out;
   }
 
-  void append_node(Subtree& out, std::size_t begin, std::size_t end, std::size_t depth, std::vector<T>& cell_lo,
-                   std::vector<T>& cell_hi, std::size_t parallel_levels) const {
-    out.depth = std::max(out.depth, depth);
-    const std::size_t count = end - begin;
-    if (count == 0) {  // the empty side of a `middle` split
-      PointNode<T> leaf{};
-      leaf.link = static_cast<std::uint32_t>(begin);
-      leaf.info = PointNode<T>::leaf_bit;
-      out.nodes.push_back(leaf);
-      return;
-    }
-    std::vector<T> lo(row(begin), row(begin) + dim_), hi(row(begin), row(begin) + dim_);
-    for (std::size_t i = begin + 1; i < end; ++i) {
-      const T* p = row(i);
-      for (std::size_t a = 0; a < dim_; ++a) {
-        lo[a] = std::min(lo[a], p[a]);
-        hi[a] = std::max(hi[a], p[a]);
-      }
-    }
+  // point_lo / point_hi: the bounds of the node's points, worked out by the parent's split.
+  void append_node(Subtree& out, const NodeRange& r, std::vector<T>& cell_lo, std::vector<T>& cell_hi,
+                   const std::vector<T>& point_lo, const std::vector<T>& point_hi, std::size_t parallel_levels) const {
+    out.depth = std::max(out.depth, r.depth);
+    const std::size_t count = r.end - r.begin;
     bool identical = true;
-    for (std::size_t a = 0; a < dim_ && identical; ++a) identical = !(hi[a] > lo[a]);
+    for (std::size_t a = 0; a < dim_ && identical; ++a) identical = !(point_hi[a] > point_lo[a]);
 
-    if (count <= params_.leaf_size || depth >= params_.max_depth || identical) {
-      if (identical) std::sort(order_ + begin, order_ + end);  // duplicates are scanned in index order
+    if (count == 0 || count <= params_.leaf_size || r.depth >= params_.max_depth || identical) {
+      if (r.buffer == 1 && count > 0) {  // back to the result buffer
+        std::copy_n(row(1, r.begin), count * dim_, row(0, r.begin));
+        std::copy_n(buffers_[1].order + r.begin, count, buffers_[0].order + r.begin);
+      }
+      std::uint32_t* ids = buffers_[0].order;
+      if (identical && count > 1) std::sort(ids + r.begin, ids + r.end);  // duplicates are scanned in index order
       PointNode<T> leaf{};
-      leaf.link = static_cast<std::uint32_t>(begin);
+      leaf.link = static_cast<std::uint32_t>(r.begin);
+      // count == 0: the empty side of a `middle` split, never entered by the search.
       leaf.info = PointNode<T>::leaf_bit | (identical && count > 1 ? PointNode<T>::identical_bit : 0u) |
                   static_cast<std::uint32_t>(count);
       out.nodes.push_back(leaf);
       return;
     }
 
-    std::vector<std::uint32_t> local(count);
+    std::uint32_t* local = local_.data() + r.begin;
     for (std::size_t i = 0; i < count; ++i) local[i] = static_cast<std::uint32_t>(i);
-    SplitInput<T> in{row(begin), dim_, local.data(), local.data() + count, lo.data(), hi.data(),
-                     cell_lo.data(), cell_hi.data(), depth};
+    SplitInput<T> in{row(r.buffer, r.begin), dim_,          local,         local + count, point_lo.data(),
+                     point_hi.data(),        cell_lo.data(), cell_hi.data(), r.depth,      keyed_.data() + r.begin};
     const std::size_t axis = AxisRule::choose(in);
     const Partition<T> part = PositionRule::split(in, axis);
-    const std::size_t mid = begin + part.left_count;
-    move_rows(begin, local);
+    const std::size_t mid = r.begin + part.left_count;
+
+    // One pass: the rows into the other buffer in the rule's order, and each side's bounds.
+    const int to = 1 - r.buffer;
+    std::vector<T> left_lo(dim_, std::numeric_limits<T>::infinity()), left_hi(dim_, -std::numeric_limits<T>::infinity());
+    std::vector<T> right_lo = left_lo, right_hi = left_hi;
+    const T* src = row(r.buffer, r.begin);
+    const std::uint32_t* src_order = buffers_[r.buffer].order + r.begin;
+    T* dst = row(to, r.begin);
+    std::uint32_t* dst_order = buffers_[to].order + r.begin;
+    auto move_side = [&](std::size_t first, std::size_t last, std::vector<T>& lo, std::vector<T>& hi) {
+      for (std::size_t i = first; i < last; ++i) {
+        const T* p = src + std::size_t{local[i]} * dim_;
+        T* q = dst + i * dim_;
+        for (std::size_t a = 0; a < dim_; ++a) {
+          q[a] = p[a];
+          lo[a] = std::min(lo[a], p[a]);
+          hi[a] = std::max(hi[a], p[a]);
+        }
+        dst_order[i] = src_order[local[i]];
+      }
+    };
+    move_side(0, part.left_count, left_lo, left_hi);
+    move_side(part.left_count, count, right_lo, right_hi);
 
     PointNode<T> node{};
     node.info = static_cast<std::uint32_t>(axis);
-    node.left_max = -std::numeric_limits<T>::infinity();  // an empty side is never entered
-    node.right_min = std::numeric_limits<T>::infinity();
-    for (std::size_t i = begin; i < mid; ++i) node.left_max = std::max(node.left_max, row(i)[axis]);
-    for (std::size_t i = mid; i < end; ++i) node.right_min = std::min(node.right_min, row(i)[axis]);
+    node.left_max = left_hi[axis];    // -inf for an empty side: never entered
+    node.right_min = right_lo[axis];  // +inf likewise
     const std::size_t self = out.nodes.size();
     out.nodes.push_back(node);
 
+    const NodeRange left{r.begin, mid, r.depth + 1, to}, right{mid, r.end, r.depth + 1, to};
     if (parallel_levels > 0) {
-      std::vector<T> left_hi = cell_hi, right_lo = cell_lo;
-      left_hi[axis] = part.plane;
-      right_lo[axis] = part.plane;
-      Subtree left, right;
-      fork_join([&] { left = build_node(begin, mid, depth + 1, cell_lo, left_hi, parallel_levels - 1); },
-                [&] { right = build_node(mid, end, depth + 1, right_lo, cell_hi, parallel_levels - 1); });
-      append_subtree(out, left);
+      std::vector<T> left_cell_hi = cell_hi, right_cell_lo = cell_lo;
+      left_cell_hi[axis] = part.plane;
+      right_cell_lo[axis] = part.plane;
+      Subtree left_tree, right_tree;
+      fork_join([&] { left_tree = build_node(left, cell_lo, left_cell_hi, left_lo, left_hi, parallel_levels - 1); },
+                [&] { right_tree = build_node(right, right_cell_lo, cell_hi, right_lo, right_hi, parallel_levels - 1); });
+      append_subtree(out, left_tree);
       out.nodes[self].link = static_cast<std::uint32_t>(out.nodes.size());
-      append_subtree(out, right);
+      append_subtree(out, right_tree);
       return;
     }
     const T saved_hi = cell_hi[axis], saved_lo = cell_lo[axis];
     cell_hi[axis] = part.plane;
-    append_node(out, begin, mid, depth + 1, cell_lo, cell_hi, 0);
+    append_node(out, left, cell_lo, cell_hi, left_lo, left_hi, 0);
     cell_hi[axis] = saved_hi;
     out.nodes[self].link = static_cast<std::uint32_t>(out.nodes.size());
     cell_lo[axis] = part.plane;
-    append_node(out, mid, end, depth + 1, cell_lo, cell_hi, 0);
+    append_node(out, right, cell_lo, cell_hi, right_lo, right_hi, 0);
     cell_lo[axis] = saved_lo;
-  }
-
-  // Puts the rows (and their original indices) of the node starting at `begin` in the order `local`.
-  void move_rows(std::size_t begin, const std::vector<std::uint32_t>& local) const {
-    const std::size_t count = local.size();
-    std::vector<T> rows(count * dim_);
-    std::vector<std::uint32_t> ids(count);
-    for (std::size_t i = 0; i < count; ++i) {
-      std::copy_n(row(begin + local[i]), dim_, rows.data() + i * dim_);
-      ids[i] = order_[begin + local[i]];
-    }
-    std::copy(rows.begin(), rows.end(), row(begin));
-    std::copy(ids.begin(), ids.end(), order_ + begin);
   }
 
   static void append_subtree(Subtree& out, const Subtree& sub) {
@@ -167,8 +184,11 @@ class Builder {
   std::size_t n_;
   std::size_t dim_;
   BuildParams params_;
-  T* points_ = nullptr;
-  std::uint32_t* order_ = nullptr;
+  Buffer buffers_[2] = {};
+  std::vector<T> spare_points_;
+  std::vector<std::uint32_t> spare_order_;
+  mutable std::vector<std::uint32_t> local_;  // node-local indices, rows [begin, end) for the node there
+  mutable std::vector<Keyed<T>> keyed_;       // the position rule's scratch, likewise
 };
 
 }  // namespace kdspace::detail

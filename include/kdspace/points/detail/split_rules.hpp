@@ -13,6 +13,13 @@
 
 namespace kdspace::detail {
 
+/// A coordinate and the node-local index of its point.
+template <class T>
+struct Keyed {
+  T key;
+  std::uint32_t index;
+};
+
 /// What a rule may look at: the node's points, the bounds of those points and the node's cell, all
 /// per axis. The rule reorders the node-local indices [first, last) (0 .. count-1 into `coords`); the
 /// builder then moves the rows themselves.
@@ -27,6 +34,7 @@ struct SplitInput {
   const T* cell_lo;  ///< the node's cell (the region of space the node stands for)
   const T* cell_hi;
   std::size_t depth;
+  Keyed<T>* keyed;  ///< scratch for (last - first) entries, for rules that select on copied keys
 
   T coord(std::uint32_t i, std::size_t axis) const { return coords[std::size_t{i} * dim + axis]; }
 };
@@ -73,15 +81,11 @@ struct MaxSpreadAxis {
 struct MedianPosition {
   template <class T>
   static Partition<T> split(const SplitInput<T>& in, std::size_t axis) {
-    struct Keyed {
-      T key;
-      std::uint32_t index;
-    };
     const std::size_t n = static_cast<std::size_t>(in.last - in.first);
-    std::vector<Keyed> keyed(n);
+    Keyed<T>* keyed = in.keyed;
     for (std::size_t i = 0; i < n; ++i) keyed[i] = {in.coord(in.first[i], axis), in.first[i]};
-    auto mid = keyed.begin() + static_cast<std::ptrdiff_t>(n / 2);
-    std::nth_element(keyed.begin(), mid, keyed.end(), [](const Keyed& a, const Keyed& b) { return a.key < b.key; });
+    Keyed<T>* mid = keyed + n / 2;
+    std::nth_element(keyed, mid, keyed + n, [](const Keyed<T>& a, const Keyed<T>& b) { return a.key < b.key; });
     for (std::size_t i = 0; i < n; ++i) in.first[i] = keyed[i].index;
     return {n / 2, mid->key};
   }

@@ -1,0 +1,143 @@
+#!/usr/bin/env bash
+# Plots the benchmark results: docs/bench_points.png (exact 10-NN queries/s against dimension, one
+# line per library, uniform and clustered workloads side by side) and docs/bench_rays.png (Mrays/s
+# against the number of boxes, one line per library, primary and random rays side by side, 1 thread).
+#
+# usage: bench/plot.sh [RESULTS_DIR [OUT_DIR]]     (defaults: bench/results, docs)
+#
+# Reads RESULTS_DIR/points.jsonl and, when present, RESULTS_DIR/rays.jsonl (the JSON lines of
+# kdspace-bench and kdspace-rays-bench); python3 (standard library only) turns them into .dat files
+# and the plot commands, bench/plot.gp draws them with gnuplot. Without rays.jsonl (or with no
+# 1-thread rays lines in it) only the points picture is made.
+set -euo pipefail
+
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/.." && pwd)
+results=${1:-$root/bench/results}
+out=${2:-$root/docs}
+
+command -v gnuplot >/dev/null || { echo "plot.sh: gnuplot not found (apt-get install gnuplot-nox)" >&2; exit 2; }
+command -v python3 >/dev/null || { echo "plot.sh: python3 not found" >&2; exit 2; }
+[ -f "$results/points.jsonl" ] || { echo "plot.sh: $results/points.jsonl not found (run bench/run_all.sh)" >&2; exit 2; }
+mkdir -p "$out"
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+python3 - "$results" "$work" <<'PYTHON'
+import json, os, sys
+
+results, work = sys.argv[1], sys.argv[2]
+
+def read_jsonl(path, bench):
+    rows = []
+    if not os.path.exists(path):
+        return rows
+    with open(path) as f:
+        for number, line in enumerate(f, 1):
+            line = line.strip()
+            if not line.startswith("{"):
+                continue
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError as e:
+                sys.exit(f"plot.sh: {path}: line {number}: {e}")
+            if row.get("bench") == bench:
+                rows.append(row)
+    return rows
+
+KNOWN_COLOURS = {
+    "kdspace-rt": "#d62728", "kdspace-ct": "#ff7f0e", "flann": "#1f77b4",
+    "nanoflann-rt": "#2ca02c", "nanoflann-ct": "#17becf",
+}
+PALETTE = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf", "#7f7f7f"]
+
+def colour_for(name, order):
+    if name in KNOWN_COLOURS:
+        return KNOWN_COLOURS[name]
+    return PALETTE[order.index(name) % len(PALETTE)]
+
+def gp_quote(s):
+    return "'" + str(s).replace("'", "''") + "'"
+
+def write_series(name, points):
+    path = os.path.join(work, name + ".dat")
+    with open(path, "w") as f:
+        for x, y in sorted(points.items()):
+            f.write(f"{x} {y}\n")
+    return path
+
+def plot_command(series, order):
+    """series: list of (file, title, library, dashtype)."""
+    if not series:  # an empty panel: a blank plot that says so
+        return ("set key off; set label 99 'no data' at graph 0.5, 0.5 center; "
+                "plot [][1:10] 1 lc rgb 'white' notitle; unset label 99; set key on")
+    parts = []
+    for path, title, library, dash in series:
+        parts.append(f"{gp_quote(path)} using 1:2 with linespoints lw 2 pt 7 ps 0.8 dt {dash} "
+                     f"lc rgb {gp_quote(colour_for(library, order))} title {gp_quote(title)}")
+    return "plot " + ", ".join(parts)
+
+commands = []
+
+# ---- (a) points: exact 10-NN on one thread, q/s against dimension -----------------------------------
+# kdspace and FLANN through their batch calls (threads = 1), nanoflann one query at a time.
+points = read_jsonl(os.path.join(results, "points.jsonl"), "points")
+knn = [r for r in points if r.get("op") == "knn10" and r.get("threads") == 1 and "qps" in r
+       and r.get("data") in ("uniform", "clustered")
+       and (r.get("api") == "batch" or not r["library"].startswith("kdspace"))]
+lib_order = sorted({r["library"] for r in knn}, key=lambda l: (list(KNOWN_COLOURS).index(l) if l in KNOWN_COLOURS else 99, l))
+n_by_dim = {}
+for data in ("uniform", "clustered"):
+    series = []
+    for library in lib_order:
+        values = {int(r["dim"]): float(r["qps"]) for r in knn if r["data"] == data and r["library"] == library}
+        if values:
+            series.append((write_series(f"points_{data}_{library}", values), library, library, 1))
+    for r in knn:
+        if r["data"] == data:
+            n_by_dim.setdefault(int(r["dim"]), set()).add(int(r["n"]))
+    commands.append(f"plot_points_{data} = {gp_quote(plot_command(series, lib_order))}")
+
+def short(n):
+    exp = len(str(n)) - 1
+    return f"1e{exp}" if n == 10 ** exp else f"{n:,}"
+
+tics = ", ".join(f'"{d}\\n(n {"/".join(short(n) for n in sorted(ns))})" {d}' for d, ns in sorted(n_by_dim.items()))
+commands.append(f"points_xtics = {gp_quote('set xtics (' + tics + ')' if tics else 'set xtics')}")
+
+# ---- (b) rays: Mrays/s against the number of boxes, 1 thread ------------------------------------------
+rays = [r for r in read_jsonl(os.path.join(results, "rays.jsonl"), "rays")
+        if r.get("threads") == 1 and "mrays_s" in r and "boxes" in r and "library" in r]
+# One line per contender (library and, where given, its build quality) and scene.
+def contender(r):
+    quality = str(r.get("build_quality", "") or "")
+    return r["library"] + (f" ({quality})" if quality else "")
+
+scenes = sorted({str(r.get("scene", "")) for r in rays})
+ray_libs = sorted({contender(r) for r in rays})
+for kind in ("primary", "random"):
+    series = []
+    for library in ray_libs:
+        for s, scene in enumerate(scenes):
+            values = {int(r["boxes"]): float(r["mrays_s"]) for r in rays
+                      if contender(r) == library and r.get("rays") == kind and str(r.get("scene", "")) == scene}
+            if values:
+                title = library if len(scenes) == 1 else f"{library}, {scene}"
+                name = f"rays_{kind}_{ray_libs.index(library)}_{s}"
+                series.append((write_series(name, values), title, library, s + 1))
+    commands.append(f"plot_rays_{kind} = {gp_quote(plot_command(series, ray_libs))}")
+commands.append(f"has_rays = {1 if rays else 0}")
+commands.append(f"rays_scenes = {gp_quote(', '.join(scenes))}")
+
+with open(os.path.join(work, "series.gp"), "w") as f:
+    f.write("\n".join(commands) + "\n")
+print(f"plot.sh: {len(knn)} 10-NN measurements ({', '.join(lib_order)}), {len(rays)} 1-thread ray measurements")
+PYTHON
+
+gnuplot -e "series='$work/series.gp'; out_points='$out/bench_points.png'; out_rays='$out/bench_rays.png'" "$here/plot.gp"
+echo "plot.sh: wrote $out/bench_points.png"
+if grep -q '^has_rays = 1' "$work/series.gp"; then
+  echo "plot.sh: wrote $out/bench_rays.png"
+else
+  echo "plot.sh: no 1-thread rays results in $results/rays.jsonl; bench_rays.png not made"
+fi

@@ -1,0 +1,847 @@
+// kdspace-rays-bench: kdspace's BoxTree side by side with Embree 3 on identical boxes and rays, in
+// one process.
+//
+// Contenders
+//   kdspace          BoxTree with the default build (sah_nlogn, one thread); closest_hit_batch.
+//   embree-user-Q    Embree user geometry (RTC_GEOMETRY_TYPE_USER), one primitive per box: the bounds
+//                    callback returns the box, the intersect callback runs kdspace's closed slab test
+//                    (double precision from the float data, t rounded to float; a ray starting inside
+//                    a box hits it at tnear; closest t, equal t to the smaller box index).
+//   embree-tri-Q     Embree triangles (RTC_GEOMETRY_TYPE_TRIANGLE): each box as 12 triangles over its
+//                    8 shared corners; box index = primID / 12.
+//   Q is the scene build quality, medium (RTC_BUILD_QUALITY_MEDIUM) or high (RTC_BUILD_QUALITY_HIGH):
+//   both for user geometry by default, medium for triangles (high, with its spatial splits, takes some
+//   40 s a build on 1e6 boxes = 12e6 triangles on one thread; --tri-quality medium,high adds it).
+//   Of the user-geometry variants the one with the higher geometric mean of its four trace speeds is
+//   marked "(peer)" in the table.
+// Embree traces with rtcIntersect1, one ray at a time through an RTCIntersectContext, as kdspace's
+// closest_hit does. The Embree device is created with "threads=1": its builds run on one thread, as
+// kdspace's default build does. For two threads both libraries spread the rays over two threads that
+// take chunks of 256 rays from a shared counter (kdspace: closest_hit_batch(rays, 2); Embree: the
+// calling thread and one std::thread, each calling rtcIntersect1), so each traces about half and a
+// costly part of the image does not leave one thread idle.
+//
+// Workloads: generate_boxes(n, uniform | clustered, seed 1) in the unit cube; primary rays of a
+// 1024 x 768 camera outside the scene (fit_camera, primary_rays) and 1e6 random rays (random_rays:
+// origins in the bounds grown by 10%, unit directions uniform on the sphere, seed 2).
+//
+// Measured: the build (wall seconds, everything from the boxes to a traceable structure; Embree: new
+// scene, geometry, buffers, commit), memory (kdspace: memory_bytes(); Embree: the bytes its device
+// allocated for the scene, as reported by its memory monitor, plus for user geometry the 24-byte boxes
+// the callbacks read), and closest-hit speed in Mrays/s on 1 and 2 threads. Repetitions are
+// interleaved across contenders (repetition loop outside, contenders inside); medians are reported.
+//
+// Agreement (first repetition, 1 thread): each Embree variant's hit for every ray against kdspace's:
+//   hit/miss      one hits, the other does not
+//   t differs     both hit, |t_a - t_b| > 1e-4 * max(t_a, t_b) + 1e-6 (the scene is the unit cube and
+//                 the directions are unit vectors: 1e-6 is some 8 float ulps of a coordinate)
+//   near ties     both hit within that tolerance but not at the same float t, at different boxes:
+//                 rounding. Embree's BVH traversal computes node entries in float, so it may cull a box
+//                 the ray enters a rounding step (~1e-7 in t here) before the hit it already has;
+//                 triangles compute t in float, so coplanar faces of different boxes land here too.
+//   ties          both hit at the same float t, at different boxes. kdspace resolves equal t to the
+//                 smaller index; the user callback does too when Embree hands it both boxes, but
+//                 Embree's BVH traversal may cull a node whose entry equals the current tfar, so the
+//                 smaller index is not guaranteed there. (kdspace compares the double t and rounds
+//                 afterwards; Embree keeps a float tfar: boxes a rounding step apart are ties to it.)
+//   grazing       any other difference where the closer of the two hits only grazes its box: the ray's
+//                 part inside that box (or, for a box one side reports and the other's slab test
+//                 rejects, its miss) is at most 1e-5 of the scene diagonal long. A ray along an edge or
+//                 a face, where kdspace's double slab test and Embree's float BVH (and triangle) tests
+//                 may decide either way. Not counted in the other columns.
+//   inside        rays whose kdspace hit has t = 0: the origin lies in (or on) a box. Triangles then
+//                 hit the exit face or another box, so for the triangle variants these rays are
+//                 counted here and left out of the other columns.
+// The first three rays with hit/miss or t differs (and, for user geometry, near ties) per contender and
+// ray set are printed on stderr.
+// The exit status is 1 when a user-geometry variant disagrees beyond ties, near ties and grazing
+// (hit/miss or t differs), or when a library's 2-thread answers differ from its 1-thread ones; 2 for a
+// usage error.
+//
+// usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--reps R] [--rays M]
+//                           [--image WxH] [--quality medium,high] [--tri-quality medium,high] [--robust]
+//                           [--quick]
+//   --sizes     scene sizes in boxes (default 1000,100000,1000000; 1e5 is accepted)
+//   --kinds     scene kinds (default uniform,clustered)
+//   --reps      repetitions (default 3)
+//   --rays      random rays (default 1000000)
+//   --image     primary rays: an image of W x H pixels (default 1024x768)
+//   --quality   Embree build qualities for user geometry (default medium,high)
+//   --tri-quality  Embree build qualities for triangles (default medium)
+//   --robust    Embree scenes with RTC_SCENE_FLAG_ROBUST (names get "-robust"); default: no flags
+//   --quick     sizes 1000,100000, 200000 random rays, a 512x384 image, 1 repetition (explicit options
+//               still win)
+//
+// Output: per (size, kind) a markdown table and an agreement table, then one JSON line per measurement
+// ({"bench":"rays",...}). Progress goes to stderr.
+#include <embree3/rtcore.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <string>
+#include <thread>
+#include <type_traits>
+#include <vector>
+
+#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/rays/scene_gen.hpp"
+
+namespace {
+
+using kdspace::Box3f;
+using kdspace::Hit;
+using kdspace::Ray;
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+double dbl(std::size_t x) {
+  return static_cast<double>(x);
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t mid = v.size() / 2;
+  return v.size() % 2 ? v[mid] : 0.5 * (v[mid - 1] + v[mid]);
+}
+
+const char* kind_name(kdspace::SceneKind kind) {
+  return kind == kdspace::SceneKind::uniform ? "uniform" : "clustered";
+}
+const char* quality_name(RTCBuildQuality q) {
+  return q == RTC_BUILD_QUALITY_HIGH ? "high" : "medium";
+}
+
+// ---- options --------------------------------------------------------------------------------------
+
+struct Options {
+  std::vector<std::size_t> sizes{1000, 100000, 1000000};
+  std::vector<kdspace::SceneKind> kinds{kdspace::SceneKind::uniform, kdspace::SceneKind::clustered};
+  std::vector<RTCBuildQuality> user_qualities{RTC_BUILD_QUALITY_MEDIUM, RTC_BUILD_QUALITY_HIGH};
+  std::vector<RTCBuildQuality> triangle_qualities{RTC_BUILD_QUALITY_MEDIUM};
+  int reps = 3;
+  std::size_t random_rays = 1000000;
+  std::size_t width = 1024, height = 768;
+  bool robust = false;  ///< RTC_SCENE_FLAG_ROBUST on the Embree scenes
+};
+
+[[noreturn]] void usage(const char* problem) {
+  if (problem) std::fprintf(stderr, "kdspace-rays-bench: %s\n", problem);
+  std::fprintf(
+      stderr,
+      "usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--reps R] [--rays M]\n"
+      "                          [--image WxH] [--quality medium,high] [--tri-quality medium,high]\n"
+      "                          [--robust] [--quick]\n");
+  std::exit(2);
+}
+
+std::vector<std::string> split_list(const std::string& list, char separator) {
+  std::vector<std::string> items;
+  std::size_t pos = 0;
+  while (pos <= list.size()) {
+    const std::size_t end = std::min(list.find(separator, pos), list.size());
+    if (end > pos) items.push_back(list.substr(pos, end - pos));
+    pos = end + 1;
+  }
+  return items;
+}
+
+std::size_t parse_count(const std::string& text) {
+  char* end = nullptr;
+  const double value = std::strtod(text.c_str(), &end);
+  if (end == text.c_str() || *end != '\0' || !(value >= 1) || value > 1e12 || value != std::floor(value))
+    usage(("not a positive whole number: " + text).c_str());
+  return static_cast<std::size_t>(value);
+}
+
+Options parse(int argc, char** argv) {
+  Options o;
+  bool quick = false, sizes_given = false, rays_given = false, reps_given = false, image_given = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) usage((a + " needs a value").c_str());
+      return argv[++i];
+    };
+    if (a == "--sizes") {
+      o.sizes.clear();
+      for (const std::string& s : split_list(next(), ',')) o.sizes.push_back(parse_count(s));
+      if (o.sizes.empty()) usage("--sizes: no size given");
+      sizes_given = true;
+    } else if (a == "--kinds") {
+      o.kinds.clear();
+      for (const std::string& s : split_list(next(), ',')) {
+        if (s == "uniform") {
+          o.kinds.push_back(kdspace::SceneKind::uniform);
+        } else if (s == "clustered") {
+          o.kinds.push_back(kdspace::SceneKind::clustered);
+        } else {
+          usage(("unknown scene kind: " + s).c_str());
+        }
+      }
+      if (o.kinds.empty()) usage("--kinds: no kind given");
+    } else if (a == "--quality" || a == "--tri-quality") {
+      std::vector<RTCBuildQuality>& qualities = a == "--quality" ? o.user_qualities : o.triangle_qualities;
+      qualities.clear();
+      for (const std::string& s : split_list(next(), ',')) {
+        if (s == "medium") {
+          qualities.push_back(RTC_BUILD_QUALITY_MEDIUM);
+        } else if (s == "high") {
+          qualities.push_back(RTC_BUILD_QUALITY_HIGH);
+        } else {
+          usage(("unknown build quality: " + s).c_str());
+        }
+      }
+      if (qualities.empty()) usage((a + ": no quality given").c_str());
+    } else if (a == "--reps") {
+      o.reps = static_cast<int>(std::min<std::size_t>(parse_count(next()), 1000));
+      reps_given = true;
+    } else if (a == "--rays") {
+      o.random_rays = parse_count(next());
+      rays_given = true;
+    } else if (a == "--image") {
+      const std::vector<std::string> wh = split_list(next(), 'x');
+      if (wh.size() != 2) usage("--image wants WxH, e.g. 1024x768");
+      o.width = parse_count(wh[0]);
+      o.height = parse_count(wh[1]);
+      image_given = true;
+    } else if (a == "--robust") {
+      o.robust = true;
+    } else if (a == "--quick") {
+      quick = true;
+    } else if (a == "--help" || a == "-h") {
+      usage(nullptr);
+    } else {
+      usage(("unknown option: " + a).c_str());
+    }
+  }
+  if (quick) {
+    if (!sizes_given) o.sizes = {1000, 100000};
+    if (!rays_given) o.random_rays = 200000;
+    if (!reps_given) o.reps = 1;
+    if (!image_given) o.width = 512, o.height = 384;
+  }
+  return o;
+}
+
+// ---- spreading rays over threads ------------------------------------------------------------------
+
+/// Calls body(begin, end) over [0, n) in chunks of 256 taken from a shared counter, on the calling
+/// thread and threads - 1 std::threads: the scheme of kdspace's closest_hit_batch.
+template <class Body>
+void for_chunks(std::size_t n, unsigned threads, const Body& body) {
+  constexpr std::size_t chunk = 256;
+  if (threads <= 1) {
+    body(std::size_t{0}, n);
+    return;
+  }
+  std::atomic<std::size_t> next{0};
+  auto run = [&] {
+    for (;;) {
+      const std::size_t begin = next.fetch_add(chunk);
+      if (begin >= n) return;
+      body(begin, std::min(n, begin + chunk));
+    }
+  };
+  std::vector<std::thread> helpers;
+  for (unsigned t = 1; t < threads; ++t) helpers.emplace_back(run);
+  run();
+  for (std::thread& t : helpers) t.join();
+}
+
+// ---- Embree ---------------------------------------------------------------------------------------
+
+/// Bytes the Embree device holds: the memory monitor adds allocations and subtracts frees.
+std::atomic<std::int64_t> embree_bytes{0};
+
+bool count_embree_bytes(void* /*user*/, ssize_t bytes, bool /*post*/) {
+  embree_bytes += static_cast<std::int64_t>(bytes);
+  return true;
+}
+
+void report_embree_error(void* /*user*/, RTCError code, const char* message) {
+  std::fprintf(stderr, "kdspace-rays-bench: Embree error %d: %s\n", static_cast<int>(code),
+               message ? message : "");
+  std::exit(1);
+}
+
+/// A ray prepared once for the user-geometry callback, as kdspace prepares it for its traversal.
+/// Embree hands the callback the RTCIntersectContext given to rtcIntersect1; this struct begins with
+/// one (standard layout), so the callback reaches the prepared ray through it (Embree's documented
+/// way of passing per-ray data to callbacks).
+struct RayContext {
+  RTCIntersectContext embree;
+  std::array<double, 3> origin;
+  std::array<double, 3> inverse;  ///< 1 / direction; 0 on axes where the direction is 0
+  std::array<bool, 3> parallel;   ///< direction component is +0 or -0
+  std::array<bool, 3> negative;   ///< direction component < 0
+
+  explicit RayContext(const Ray& ray) {
+    rtcInitIntersectContext(&embree);
+    for (int a = 0; a < 3; ++a) {
+      origin[a] = ray.origin[a];
+      parallel[a] = ray.direction[a] == 0;
+      negative[a] = ray.direction[a] < 0;
+      inverse[a] = parallel[a] ? 0.0 : 1.0 / static_cast<double>(ray.direction[a]);
+    }
+  }
+};
+static_assert(std::is_standard_layout<RayContext>::value, "RayContext must start with the Embree context");
+
+/// The closed slab test of kdspace's traversal (Kay & Kajiya): narrows [t_near, t_far] to the part
+/// inside the box; false when nothing is left.
+inline bool clip_to_box(const Box3f& b, const RayContext& r, double& t_near, double& t_far) {
+  for (int a = 0; a < 3; ++a) {
+    if (r.parallel[a]) {
+      if (r.origin[a] < b.lo[a] || r.origin[a] > b.hi[a]) return false;
+      continue;
+    }
+    const double t_lo = (static_cast<double>(b.lo[a]) - r.origin[a]) * r.inverse[a];
+    const double t_hi = (static_cast<double>(b.hi[a]) - r.origin[a]) * r.inverse[a];
+    const double t0 = r.negative[a] ? t_hi : t_lo, t1 = r.negative[a] ? t_lo : t_hi;
+    if (t0 > t_near) t_near = t0;
+    if (t1 < t_far) t_far = t1;
+  }
+  return t_near <= t_far;
+}
+
+void box_bounds(const RTCBoundsFunctionArguments* args) {
+  const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
+  RTCBounds* out = args->bounds_o;
+  out->lower_x = b.lo[0];
+  out->lower_y = b.lo[1];
+  out->lower_z = b.lo[2];
+  out->upper_x = b.hi[0];
+  out->upper_y = b.hi[1];
+  out->upper_z = b.hi[2];
+}
+
+/// rtcIntersect1 calls this with N = 1 and our RayContext; anything else is not what we measure.
+void box_intersect(const RTCIntersectFunctionNArguments* args) {
+  if (args->N != 1) {
+    std::fprintf(stderr,
+                 "kdspace-rays-bench: user geometry called with N = %u (only rtcIntersect1 is used)\n",
+                 args->N);
+    std::abort();
+  }
+  if (args->valid[0] == 0) return;
+  const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
+  const RayContext& ray = *reinterpret_cast<const RayContext*>(args->context);
+  RTCRayN* rays = RTCRayHitN_RayN(args->rayhit, 1);
+  RTCHitN* hits = RTCRayHitN_HitN(args->rayhit, 1);
+  float& tfar = RTCRayN_tfar(rays, 1, 0);
+  double t_near = RTCRayN_tnear(rays, 1, 0), t_far = tfar;
+  if (!clip_to_box(b, ray, t_near, t_far)) return;
+  constexpr double largest = std::numeric_limits<float>::max();
+  const auto t = static_cast<float>(t_near > largest ? largest : t_near);
+  unsigned& hit_geometry = RTCHitN_geomID(hits, 1, 0);
+  unsigned& hit_box = RTCHitN_primID(hits, 1, 0);
+  // Here t <= tfar (rounding to float keeps the order). Closest t; at equal t the smaller box index,
+  // or any box while there is no hit yet (a hit at exactly the ray's initial tfar).
+  if (!(t < tfar || hit_geometry == RTC_INVALID_GEOMETRY_ID || args->primID < hit_box)) return;
+  tfar = t;
+  RTCHitN_Ng_x(hits, 1, 0) = 0;
+  RTCHitN_Ng_y(hits, 1, 0) = 0;
+  RTCHitN_Ng_z(hits, 1, 0) = 0;
+  RTCHitN_u(hits, 1, 0) = 0;
+  RTCHitN_v(hits, 1, 0) = 0;
+  hit_box = args->primID;
+  hit_geometry = args->geomID;
+  RTCHitN_instID(hits, 1, 0, 0) = args->context->instID[0];
+}
+
+RTCRayHit make_rayhit(const Ray& ray) {
+  RTCRayHit rh;
+  rh.ray.org_x = ray.origin[0];
+  rh.ray.org_y = ray.origin[1];
+  rh.ray.org_z = ray.origin[2];
+  rh.ray.tnear = 0;
+  rh.ray.dir_x = ray.direction[0];
+  rh.ray.dir_y = ray.direction[1];
+  rh.ray.dir_z = ray.direction[2];
+  rh.ray.time = 0;
+  rh.ray.tfar = std::numeric_limits<float>::infinity();
+  rh.ray.mask = 0xffffffffu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  return rh;
+}
+
+// ---- contenders -----------------------------------------------------------------------------------
+
+class Contender {
+ public:
+  virtual ~Contender() = default;
+  virtual std::string name() const = 0;
+  virtual const char* library() const = 0;
+  virtual const char* quality() const { return ""; }
+  virtual void build(const std::vector<Box3f>& boxes) = 0;
+  virtual std::vector<Hit> trace(const std::vector<Ray>& rays, unsigned threads) const = 0;
+  /// Frees what build made.
+  virtual void release() = 0;
+  /// Bytes held by the built structure (see the header comment).
+  virtual std::size_t memory_bytes() const = 0;
+};
+
+class KdspaceContender final : public Contender {
+ public:
+  std::string name() const override { return "kdspace"; }
+  const char* library() const override { return "kdspace"; }
+  void build(const std::vector<Box3f>& boxes) override { tree_ = std::make_unique<kdspace::BoxTree>(boxes); }
+  std::vector<Hit> trace(const std::vector<Ray>& rays, unsigned threads) const override {
+    return tree_->closest_hit_batch(rays, threads);
+  }
+  void release() override { tree_.reset(); }
+  std::size_t memory_bytes() const override { return tree_->memory_bytes(); }
+
+ private:
+  std::unique_ptr<kdspace::BoxTree> tree_;
+};
+
+class EmbreeContender final : public Contender {
+ public:
+  EmbreeContender(RTCDevice device, bool triangles, RTCBuildQuality quality, bool robust)
+      : device_(device), triangles_(triangles), quality_(quality), robust_(robust) {}
+  ~EmbreeContender() override { release(); }
+
+  std::string name() const override {
+    return std::string(library()) + "-" + quality_name(quality_) + (robust_ ? "-robust" : "");
+  }
+  const char* library() const override { return triangles_ ? "embree-tri" : "embree-user"; }
+  const char* quality() const override { return quality_name(quality_); }
+
+  void build(const std::vector<Box3f>& boxes) override {
+    release();
+    const std::int64_t bytes_before = embree_bytes.load();
+    scene_ = rtcNewScene(device_);
+    rtcSetSceneBuildQuality(scene_, quality_);
+    if (robust_) rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    RTCGeometry geometry;
+    if (triangles_) {
+      geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+      fill_triangles(geometry, boxes);
+    } else {
+      geometry = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_USER);
+      rtcSetGeometryUserPrimitiveCount(geometry, static_cast<unsigned>(boxes.size()));
+      rtcSetGeometryUserData(geometry, const_cast<Box3f*>(boxes.data()));
+      rtcSetGeometryBoundsFunction(geometry, box_bounds, nullptr);
+      rtcSetGeometryIntersectFunction(geometry, box_intersect);
+      // No occluded function: only rtcIntersect1 is measured.
+    }
+    rtcSetGeometryBuildQuality(geometry, quality_);
+    rtcCommitGeometry(geometry);
+    rtcAttachGeometry(scene_, geometry);
+    rtcReleaseGeometry(geometry);
+    rtcCommitScene(scene_);
+    bytes_ = static_cast<std::size_t>(std::max<std::int64_t>(0, embree_bytes.load() - bytes_before));
+    // The user-geometry callbacks read the application's boxes: count them as part of the structure.
+    if (!triangles_) bytes_ += boxes.size() * sizeof(Box3f);
+  }
+
+  std::vector<Hit> trace(const std::vector<Ray>& rays, unsigned threads) const override {
+    std::vector<Hit> hits(rays.size());
+    const RTCScene scene = scene_;
+    const bool triangles = triangles_;
+    for_chunks(rays.size(), threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        RTCRayHit rh = make_rayhit(rays[i]);
+        if (triangles) {
+          RTCIntersectContext context;
+          rtcInitIntersectContext(&context);
+          rtcIntersect1(scene, &context, &rh);
+          if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID)
+            hits[i] = Hit{static_cast<std::int32_t>(rh.hit.primID / 12), rh.ray.tfar};
+        } else {
+          RayContext context(rays[i]);  // the reciprocal direction etc., once per ray, as kdspace does
+          rtcIntersect1(scene, &context.embree, &rh);
+          if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID)
+            hits[i] = Hit{static_cast<std::int32_t>(rh.hit.primID), rh.ray.tfar};
+        }
+      }
+    });
+    return hits;
+  }
+
+  void release() override {
+    if (scene_) rtcReleaseScene(scene_);
+    scene_ = nullptr;
+  }
+  std::size_t memory_bytes() const override { return bytes_; }
+
+ private:
+  /// Box i: corners 8i + (x is hi) + 2 (y is hi) + 4 (z is hi); two triangles per face, 12i .. 12i + 11.
+  static void fill_triangles(RTCGeometry geometry, const std::vector<Box3f>& boxes) {
+    auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
+        geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 8 * boxes.size()));
+    auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+        geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), 12 * boxes.size()));
+    static constexpr unsigned faces[12][3] = {
+        {0, 4, 6}, {0, 6, 2},  // x = lo
+        {1, 3, 7}, {1, 7, 5},  // x = hi
+        {0, 1, 5}, {0, 5, 4},  // y = lo
+        {2, 6, 7}, {2, 7, 3},  // y = hi
+        {0, 2, 3}, {0, 3, 1},  // z = lo
+        {4, 5, 7}, {4, 7, 6},  // z = hi
+    };
+    for (std::size_t i = 0; i < boxes.size(); ++i) {
+      const Box3f& b = boxes[i];
+      for (unsigned corner = 0; corner < 8; ++corner) {
+        float* v = vertices + 3 * (8 * i + corner);
+        v[0] = (corner & 1u) ? b.hi[0] : b.lo[0];
+        v[1] = (corner & 2u) ? b.hi[1] : b.lo[1];
+        v[2] = (corner & 4u) ? b.hi[2] : b.lo[2];
+      }
+      const auto base = static_cast<unsigned>(8 * i);
+      for (unsigned f = 0; f < 12; ++f)
+        for (unsigned k = 0; k < 3; ++k) indices[3 * (12 * i + f) + k] = base + faces[f][k];
+    }
+  }
+
+  RTCDevice device_;
+  bool triangles_;
+  RTCBuildQuality quality_;
+  bool robust_;
+  RTCScene scene_ = nullptr;
+  std::size_t bytes_ = 0;
+};
+
+// ---- agreement ------------------------------------------------------------------------------------
+
+struct Agreement {
+  std::size_t rays = 0;  ///< rays compared in the columns below
+  std::size_t hit_miss = 0;
+  std::size_t t_differs = 0;
+  std::size_t near_ties = 0;
+  std::size_t ties = 0;
+  std::size_t grazing = 0;  ///< differences where the closer of the two hits only grazes its box
+  std::size_t inside = 0;   ///< rays whose kdspace hit is at t = 0
+  bool inside_excluded = false;
+  std::size_t threads_differ = 0;  ///< rays whose 2-thread answer differs from the 1-thread one
+
+  std::size_t real() const { return hit_miss + t_differs + threads_differ; }
+  Agreement& operator+=(const Agreement& o) {
+    rays += o.rays;
+    hit_miss += o.hit_miss;
+    t_differs += o.t_differs;
+    near_ties += o.near_ties;
+    ties += o.ties;
+    grazing += o.grazing;
+    inside += o.inside;
+    threads_differ += o.threads_differ;
+    return *this;
+  }
+};
+
+bool t_close(float a, float b) {
+  const double da = a, db = b;
+  return std::abs(da - db) <= 1e-4 * std::max(std::abs(da), std::abs(db)) + 1e-6;
+}
+
+/// Length (in t) of the part of the ray inside the box: negative when the ray misses it, by about
+/// how far in t; -inf when the ray runs parallel to a slab outside it.
+double segment_in_box(const Box3f& box, const Ray& ray) {
+  const RayContext prepared(ray);
+  double t_near = 0, t_far = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a)
+    if (prepared.parallel[a] && (prepared.origin[a] < box.lo[a] || prepared.origin[a] > box.hi[a]))
+      return -std::numeric_limits<double>::infinity();
+  clip_to_box(box, prepared, t_near, t_far);
+  return t_far - t_near;
+}
+
+/// Counts how `other` differs from `reference` (kdspace's hits). A difference whose closer hit only
+/// grazes its box (the ray's part inside it, or its miss distance, is at most `graze` in t: a ray along
+/// an edge or a face, where float and double arithmetic may decide either way) is counted as grazing.
+/// The first few rays of each kind of difference go to stderr with `label`: hit/miss and t differs,
+/// and near ties when `exact` (the user geometry, whose t is computed as kdspace's is; triangles
+/// differ in rounding, so coplanar faces of different boxes are expected there).
+Agreement compare(const std::vector<Hit>& reference, const std::vector<Hit>& other,
+                  const std::vector<Ray>& rays, const std::vector<Box3f>& boxes, double graze,
+                  bool exclude_inside, bool exact, const std::string& label) {
+  Agreement g;
+  g.inside_excluded = exclude_inside;
+  auto show = [&](const char* what, std::size_t count, std::size_t i) {
+    if (count > 3) return;
+    const Ray& r = rays[i];
+    std::fprintf(
+        stderr,
+        "  %s: %s, ray %zu (origin %.9g %.9g %.9g, direction %.9g %.9g %.9g): kdspace box %d t %.9g, "
+        "other box %d t %.9g\n",
+        label.c_str(), what, i, r.origin[0], r.origin[1], r.origin[2], r.direction[0], r.direction[1],
+        r.direction[2], reference[i].box, reference[i].t, other[i].box, other[i].t);
+  };
+  for (std::size_t i = 0; i < reference.size(); ++i) {
+    const Hit& a = reference[i];
+    const Hit& b = other[i];
+    const bool inside = a.hit() && a.t == 0;
+    if (inside) ++g.inside;
+    if (inside && exclude_inside) continue;
+    ++g.rays;
+    if (!a.hit() && !b.hit()) continue;
+    if (a.hit() && b.hit()) {
+      if (a.box == b.box && t_close(a.t, b.t)) continue;  // agree
+      if (a.box != b.box && a.t == b.t) {
+        ++g.ties;
+        continue;
+      }
+    }
+    const Hit& closer = a.hit() && (!b.hit() || a.t <= b.t) ? a : b;
+    const double length = segment_in_box(boxes[static_cast<std::size_t>(closer.box)], rays[i]);
+    if (std::abs(length) <= graze) {
+      ++g.grazing;
+    } else if (a.hit() != b.hit()) {
+      show("hit/miss", ++g.hit_miss, i);
+    } else if (!t_close(a.t, b.t)) {
+      show("t differs", ++g.t_differs, i);
+    } else {
+      ++g.near_ties;
+      if (exact) show("near tie", g.near_ties, i);
+    }
+  }
+  return g;
+}
+
+std::size_t count_different(const std::vector<Hit>& a, const std::vector<Hit>& b) {
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) n += a[i] != b[i];
+  return n;
+}
+
+// ---- one scene ------------------------------------------------------------------------------------
+
+struct RaySet {
+  const char* name;
+  std::vector<Ray> rays;
+};
+
+/// The measurements of one contender over the repetitions: [ray set][threads - 1].
+struct Samples {
+  std::vector<double> build_s;
+  std::array<std::array<std::vector<double>, 2>, 2> mrays;
+  std::size_t memory_bytes = 0;
+  std::array<Agreement, 2> agreement;  ///< per ray set, against kdspace (unused for kdspace)
+
+  double speed(int set, int threads_index) const { return median(mrays[set][threads_index]); }
+  double geometric_mean_speed() const {
+    double log_sum = 0;
+    for (int s = 0; s < 2; ++s)
+      for (int t = 0; t < 2; ++t) log_sum += std::log(std::max(speed(s, t), 1e-300));
+    return std::exp(log_sum / 4);
+  }
+};
+
+std::string format_ratio(double kd, double other) {
+  if (!(other > 0)) return "-";
+  char text[32];
+  std::snprintf(text, sizeof text, "%.2f", kd / other);
+  return text;
+}
+
+Box3f scene_bounds(const std::vector<Box3f>& boxes) {
+  Box3f bounds;
+  bounds.lo.fill(std::numeric_limits<float>::infinity());
+  bounds.hi.fill(-std::numeric_limits<float>::infinity());
+  for (const Box3f& b : boxes)
+    for (int a = 0; a < 3; ++a) {
+      bounds.lo[a] = std::min(bounds.lo[a], b.lo[a]);
+      bounds.hi[a] = std::max(bounds.hi[a], b.hi[a]);
+    }
+  return bounds;
+}
+
+/// Runs one (size, kind) and prints its tables and JSON lines. Returns false on a real disagreement.
+bool run_scene(const Options& o, std::size_t n, kdspace::SceneKind kind,
+               const std::vector<std::unique_ptr<Contender>>& contenders) {
+  const std::vector<Box3f> boxes = kdspace::generate_boxes(n, kind, 1);
+  const Box3f bounds = scene_bounds(boxes);
+  // Grazing threshold in t: 1e-5 of the scene's diagonal (both ray sets have unit directions).
+  const double graze = 1e-5 * std::sqrt(std::pow(bounds.hi[0] - bounds.lo[0], 2.0) +
+                                        std::pow(bounds.hi[1] - bounds.lo[1], 2.0) +
+                                        std::pow(bounds.hi[2] - bounds.lo[2], 2.0));
+  std::array<RaySet, 2> sets{
+      RaySet{"primary", kdspace::primary_rays(kdspace::fit_camera(bounds, dbl(o.width) / dbl(o.height)),
+                                              o.width, o.height)},
+      RaySet{"random", kdspace::random_rays(o.random_rays, bounds, 2)}};
+
+  std::vector<Samples> samples(contenders.size());
+  std::array<std::vector<Hit>, 2> reference;  // kdspace, first repetition, 1 thread
+  for (int rep = 0; rep < o.reps; ++rep) {
+    for (std::size_t c = 0; c < contenders.size(); ++c) {
+      Contender& contender = *contenders[c];
+      std::fprintf(stderr, "  %zu %s rep %d/%d: %s\n", n, kind_name(kind), rep + 1, o.reps,
+                   contender.name().c_str());
+      const auto start = Clock::now();
+      contender.build(boxes);
+      samples[c].build_s.push_back(seconds_since(start));
+      samples[c].memory_bytes = contender.memory_bytes();
+      for (int s = 0; s < 2; ++s) {
+        std::array<std::vector<Hit>, 2> answers;
+        for (unsigned threads = 1; threads <= 2; ++threads) {
+          const auto trace_start = Clock::now();
+          answers[threads - 1] = contender.trace(sets[s].rays, threads);
+          const double seconds = seconds_since(trace_start);
+          samples[c].mrays[s][threads - 1].push_back(dbl(sets[s].rays.size()) / seconds / 1e6);
+        }
+        if (rep != 0) continue;
+        // c = 0 is kdspace: it sets the reference the others are compared with.
+        if (c == 0) reference[s] = answers[0];
+        Agreement& g = samples[c].agreement[s];
+        const bool triangles = std::string(contender.library()) == "embree-tri";
+        if (c != 0)
+          g = compare(reference[s], answers[0], sets[s].rays, boxes, graze, triangles, !triangles,
+                      contender.name() + " " + sets[s].name);
+        g.threads_differ = count_different(answers[0], answers[1]);
+      }
+      contender.release();
+    }
+  }
+
+  // The user-geometry peer: the better of the qualities run.
+  std::size_t peer = 0;
+  for (std::size_t c = 1; c < contenders.size(); ++c)
+    if (std::string(contenders[c]->library()) == "embree-user" &&
+        (peer == 0 || samples[c].geometric_mean_speed() > samples[peer].geometric_mean_speed()))
+      peer = c;
+
+  std::printf("\n### %zu boxes, %s; %zu primary rays (%zux%zu), %zu random rays; median of %d\n\n", n,
+              kind_name(kind), sets[0].rays.size(), o.width, o.height, sets[1].rays.size(), o.reps);
+  std::printf(
+      "| contender | build s | memory MB | primary Mrays/s 1 thr | 2 thr | random Mrays/s 1 thr | 2 thr "
+      "| kdspace / contender: build s | primary 1 thr | 2 thr | random 1 thr | 2 thr |\n");
+  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  const Samples& kd = samples[0];
+  for (std::size_t c = 0; c < contenders.size(); ++c) {
+    const Samples& s = samples[c];
+    std::string name = contenders[c]->name();
+    if (c == peer && c != 0) name += " (peer)";
+    std::printf("| %s | %.4f | %.1f | %.3f | %.3f | %.3f | %.3f |", name.c_str(), median(s.build_s),
+                dbl(s.memory_bytes) / 1e6, s.speed(0, 0), s.speed(0, 1), s.speed(1, 0), s.speed(1, 1));
+    if (c == 0) {
+      std::printf(" - | - | - | - | - |\n");
+    } else {
+      std::printf(" %s | %s | %s | %s | %s |\n", format_ratio(median(kd.build_s), median(s.build_s)).c_str(),
+                  format_ratio(kd.speed(0, 0), s.speed(0, 0)).c_str(),
+                  format_ratio(kd.speed(0, 1), s.speed(0, 1)).c_str(),
+                  format_ratio(kd.speed(1, 0), s.speed(1, 0)).c_str(),
+                  format_ratio(kd.speed(1, 1), s.speed(1, 1)).c_str());
+    }
+  }
+
+  std::printf(
+      "\nAgreement with kdspace (first repetition, 1 thread). t differs: |dt| > 1e-4 max(t) + 1e-6; "
+      "near ties: other box at a close but unequal t (float rounding); ties: other box at equal t; "
+      "grazing: the closer hit's path through its box (or miss) <= 1e-5 of the scene diagonal; "
+      "inside: kdspace hit at t = 0, left out of the other columns for triangles.\n\n");
+  std::printf(
+      "| contender | rays | compared | hit/miss | t differs | near ties | ties (equal t) | grazing | "
+      "inside | 2 thr != 1 thr |\n");
+  std::printf("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  bool agree = true;
+  for (std::size_t c = 0; c < contenders.size(); ++c) {
+    for (int set = 0; set < 2; ++set) {
+      const Agreement& g = samples[c].agreement[set];
+      if (c == 0) {
+        std::printf(
+            "| %s | %s | - | - | - | - | - | - | %zu | %zu |\n", contenders[c]->name().c_str(),
+            sets[set].name,
+            compare(reference[set], reference[set], sets[set].rays, boxes, graze, false, true, "").inside,
+            g.threads_differ);
+      } else {
+        std::printf("| %s | %s | %zu | %zu | %zu | %zu | %zu | %zu | %zu%s | %zu |\n",
+                    contenders[c]->name().c_str(), sets[set].name, g.rays, g.hit_miss, g.t_differs,
+                    g.near_ties, g.ties, g.grazing, g.inside, g.inside_excluded ? " (left out)" : "",
+                    g.threads_differ);
+      }
+      const bool user = std::string(contenders[c]->library()) == "embree-user";
+      if (g.threads_differ > 0 || (user && g.real() > 0)) agree = false;
+    }
+  }
+  if (!agree)
+    std::printf("\nDISAGREEMENT: see the table above (user geometry beyond ties and rounding, or threads)\n");
+
+  std::printf("\n");
+  for (std::size_t c = 0; c < contenders.size(); ++c) {
+    const Samples& s = samples[c];
+    for (int set = 0; set < 2; ++set)
+      for (int t = 0; t < 2; ++t) {
+        const Agreement& g = s.agreement[set];
+        std::printf(
+            "{\"bench\":\"rays\",\"library\":\"%s\",\"build_quality\":\"%s\",\"boxes\":%zu,\"scene\":\"%s\","
+            "\"rays\":\"%s\",\"ray_count\":%zu,\"threads\":%d,\"mrays_s\":%.4f,\"build_s\":%.5f,"
+            "\"memory_bytes\":%zu,\"reps\":%d",
+            contenders[c]->library(), contenders[c]->quality(), n, kind_name(kind), sets[set].name,
+            sets[set].rays.size(), t + 1, s.speed(set, t), median(s.build_s), s.memory_bytes, o.reps);
+        if (c != 0)
+          std::printf(
+              ",\"peer\":%s,\"hit_miss\":%zu,\"t_differs\":%zu,\"near_ties\":%zu,\"ties\":%zu,"
+              "\"grazing\":%zu,\"inside\":%zu,\"inside_excluded\":%s",
+              c == peer ? "true" : "false", g.hit_miss, g.t_differs, g.near_ties, g.ties, g.grazing, g.inside,
+              g.inside_excluded ? "true" : "false");
+        std::printf("}\n");
+      }
+  }
+  std::fflush(stdout);
+  return agree;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Options o = parse(argc, argv);
+
+  // One thread for Embree's builds, like kdspace's default build.
+  RTCDevice device = rtcNewDevice("threads=1");
+  if (!device) {
+    std::fprintf(stderr, "kdspace-rays-bench: rtcNewDevice failed (error %d)\n",
+                 static_cast<int>(rtcGetDeviceError(nullptr)));
+    return 1;
+  }
+  rtcSetDeviceErrorFunction(device, report_embree_error, nullptr);
+  rtcSetDeviceMemoryMonitorFunction(device, count_embree_bytes, nullptr);
+
+  const ssize_t tasking = rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_TASKING_SYSTEM);
+  std::printf("# kdspace-rays-bench: kdspace BoxTree vs Embree %zd.%zd.%zd\n\n",
+              rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_MAJOR),
+              rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_MINOR),
+              rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_PATCH));
+  std::printf(
+      "kdspace: BoxTree default build (sah_nlogn, 1 thread), closest_hit_batch. Embree: device \"threads=1\" "
+      "(builds on 1 thread; tasking %s; backface culling %s), rtcIntersect1 per ray; user geometry = boxes "
+      "with kdspace's slab test in the callback; tri = 12 triangles per box. Build quality in the name. "
+      "2 thr: two threads sharing the rays in chunks of 256. hardware threads: %u.\n",
+      tasking == 0   ? "internal"
+      : tasking == 1 ? "TBB"
+      : tasking == 2 ? "PPL"
+                     : "unknown",
+      rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) ? "on" : "off",
+      std::thread::hardware_concurrency());
+
+  bool agree = true;
+  {
+    std::vector<std::unique_ptr<Contender>> contenders;
+    contenders.push_back(std::make_unique<KdspaceContender>());
+    for (const RTCBuildQuality q : o.user_qualities)
+      contenders.push_back(std::make_unique<EmbreeContender>(device, false, q, o.robust));
+    for (const RTCBuildQuality q : o.triangle_qualities)
+      contenders.push_back(std::make_unique<EmbreeContender>(device, true, q, o.robust));
+    for (const std::size_t n : o.sizes)
+      for (const kdspace::SceneKind kind : o.kinds)
+        if (!run_scene(o, n, kind, contenders)) agree = false;
+  }
+  rtcReleaseDevice(device);
+  return agree ? 0 : 1;
+}

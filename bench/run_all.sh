@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# Runs the whole benchmark and plots it:
+#   build/bench/bench/kdspace-bench (all point workloads)  -> bench/results/points.md, points.jsonl
+#   build/bench/bench/kdspace-rays-bench, when built       -> bench/results/rays.md, rays.jsonl
+#   bench/plot.sh                                           -> docs/bench_points.png, docs/bench_rays.png
+#
+# usage: bench/run_all.sh [kdspace-bench options, e.g. --quick or --workload uniform3d]
+# environment: BUILD_DIR (default build/bench), RESULTS_DIR (default bench/results), PLOT_DIR
+#              (default docs), RAYS_BENCH_ARGS (options for kdspace-rays-bench)
+#
+# Build first: cmake --preset bench && cmake --build build/bench -j2
+# Each bench's stdout is kept whole in bench/results/*.log; its JSON lines go to *.jsonl, the rest
+# (the markdown tables) to *.md. Progress (stderr) shows on the terminal. The exit status is 1 when
+# either bench fails (kdspace-bench exits 1 when exact answers disagree), after the plot is made.
+set -uo pipefail
+
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/.." && pwd)
+build=${BUILD_DIR:-$root/build/bench}
+results=${RESULTS_DIR:-$root/bench/results}
+plots=${PLOT_DIR:-$root/docs}
+points_bench=$build/bench/kdspace-bench
+rays_bench=$build/bench/kdspace-rays-bench
+mkdir -p "$results"
+
+if [ ! -x "$points_bench" ]; then
+  echo "run_all.sh: $points_bench not built; run: cmake --preset bench && cmake --build build/bench -j2" >&2
+  exit 2
+fi
+
+status=0
+
+# Runs one bench ($1: name of the results, then the command), teeing stdout to NAME.log and
+# splitting it into NAME.jsonl and NAME.md.
+run_bench() {
+  local name=$1
+  shift
+  echo "run_all.sh: $*" >&2
+  "$@" | tee "$results/$name.log"
+  local rc=${PIPESTATUS[0]}
+  grep '^{' "$results/$name.log" > "$results/$name.jsonl" || true
+  grep -v '^{' "$results/$name.log" > "$results/$name.md" || true
+  if [ "$rc" -ne 0 ]; then
+    echo "run_all.sh: $name bench exited with status $rc" >&2
+    status=1
+  fi
+}
+
+run_bench points "$points_bench" "$@"
+
+if [ -x "$rays_bench" ]; then
+  # shellcheck disable=SC2086  # RAYS_BENCH_ARGS is a list of options
+  run_bench rays "$rays_bench" ${RAYS_BENCH_ARGS:-}
+else
+  echo "run_all.sh: $rays_bench not built; no ray results this run" >&2
+  if [ -f "$results/rays.jsonl" ]; then
+    echo "run_all.sh: moving the earlier $results/rays.* aside (rays.*.old) so the plot shows this run only" >&2
+    for f in "$results"/rays.log "$results"/rays.md "$results"/rays.jsonl; do
+      [ -f "$f" ] && mv "$f" "$f.old"
+    done
+  fi
+fi
+
+"$here/plot.sh" "$results" "$plots" || status=1
+exit $status
