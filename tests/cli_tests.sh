@@ -137,7 +137,15 @@ expect_error "-k ten" 2 "-k" "ten" -- knn --base base.csv --query query.csv -k t
 expect_error "-k -3" 2 "-k" "-3" -- knn --base base.csv --query query.csv -k -3 --out ids.ivecs
 expect_error "--leaf 0" 2 "--leaf" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --leaf 0
 expect_error "--metric bad" 2 "--metric" "l3" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --metric l3
-expect_error "--forest not available" 2 "not available yet" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 4
+expect_error "--forest 0" 2 "--forest" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 0
+expect_error "--checks without --forest" 2 "--checks needs --forest" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --checks 10
+expect_error "--checks -5" 2 "--checks" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --checks -5
+expect_error "--recall 0" 2 "--recall must be in (0, 1]" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --recall 0
+expect_error "--recall 1.5" 2 "--recall" "1.5" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --recall 1.5
+expect_error "--recall with --checks" 2 "exclude each other" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --recall 0.9 --checks 9
+expect_error "--forest with --eps" 2 "--eps" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --eps 0.5
+expect_error "--forest with --metric l1" 2 "l2 only" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --metric l1
+expect_error "--forest with --axis" 2 "--axis" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --axis cycle
 expect_error "negative radius" 2 "-r" -- radius --base base.csv --query query.csv -r -0.5 --out ids.ivecs
 expect_error "NaN radius" 2 "-r" -- radius --base base.csv --query query.csv -r nan --out ids.ivecs
 expect_error "unknown command" 2 "frobnicate" -- frobnicate
@@ -219,6 +227,15 @@ done
 if expect_ok "knn k = n" knn --base base.csv --query query.csv -k 40 --out ids.ivecs --distances dist.fvecs --position middle --leaf 1; then
   check_results "knn k = n equals brute force" knn l2 40 base.csv query.csv
 fi
+# A forest whose budget covers every point is exact.
+if expect_ok "knn --forest, checks = n" knn --base base.csv --query query.csv -k 5 --out ids.ivecs --distances dist.fvecs \
+  --forest 3 --checks 40 --leaf 2; then
+  check_results "knn --forest with checks = n equals brute force" knn l2 5 base.csv query.csv
+fi
+if expect_ok "knn --forest on a float32 base" knn --base base.npy --query query.fvecs -k 7 --out ids.ivecs --distances dist.fvecs \
+  --forest 2 --checks 40 --threads 2; then
+  check_results "knn --forest float32 equals brute force" knn l2 7 base.csv query.csv
+fi
 if expect_ok "radius" radius --base cluster.csv --query cluster_query.csv -r 1.5 --out ids.ivecs --distances dist.fvecs; then
   check_results "radius rows of differing lengths equal brute force" radius l2 1.5 cluster.csv cluster_query.csv
 fi
@@ -248,6 +265,13 @@ EOF
 common_keys="build_s query_s queries_per_s threads depth leaves nodes_visited_per_query points_visited_per_query points dim queries metric index_bytes"
 if expect_ok "knn --stats" knn --base base.csv --query query.csv -k 3 --out ids.ivecs --stats --threads=1; then
   check_stats "knn --stats is JSON with the required keys" "$common_keys k"
+fi
+if expect_ok "knn --forest --stats" knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 4 --checks 8 --stats; then
+  check_stats "knn --forest --stats is JSON with the required keys" "$common_keys k trees checks recall recall_queries"
+fi
+if expect_ok "knn --recall --stats" knn --base base.csv --query query.csv -k 3 --out ids.ivecs --recall 0.9 --stats; then
+  check_stats "knn --recall --stats is JSON with the tuning keys" \
+    "$common_keys k trees checks recall target_recall tune_s tuning_recall validation_recall"
 fi
 if expect_ok "radius --stats" radius --base cluster.csv --query cluster_query.csv -r 2 --out ids.ivecs --stats; then
   check_stats "radius --stats is JSON with the required keys" "$common_keys radius"

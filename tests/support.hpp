@@ -144,6 +144,33 @@ std::vector<T> make_points(Shape shape, std::size_t n, std::size_t dim, std::uin
   return pts;
 }
 
+/// nq queries: random in the data's bounding box grown by a quarter, every third one a data point,
+/// every seventh far outside.
+template <class T>
+std::vector<T> make_queries(const std::vector<T>& pts, std::size_t n, std::size_t dim, std::size_t nq,
+                            std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::vector<T> lo(pts.begin(), pts.begin() + static_cast<std::ptrdiff_t>(dim)), hi = lo;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t a = 0; a < dim; ++a) {
+      lo[a] = std::min(lo[a], pts[i * dim + a]);
+      hi[a] = std::max(hi[a], pts[i * dim + a]);
+    }
+  std::vector<T> q(nq * dim);
+  for (std::size_t j = 0; j < nq; ++j) {
+    const std::size_t on = std::uniform_int_distribution<std::size_t>(0, n - 1)(rng);
+    for (std::size_t a = 0; a < dim; ++a) {
+      const double span = static_cast<double>(hi[a]) - static_cast<double>(lo[a]);
+      const double mid = static_cast<double>(lo[a]) / 2 + static_cast<double>(hi[a]) / 2;
+      double v = mid + std::uniform_real_distribution<double>(-0.625, 0.625)(rng) * span;
+      if (j % 3 == 1) v = static_cast<double>(pts[on * dim + a]);
+      if (j % 7 == 5) v = mid + 50 * (span + 1);
+      q[j * dim + a] = static_cast<T>(v);
+    }
+  }
+  return q;
+}
+
 // ---- scenes (test_rays.cpp, test_rays_build.cpp) ------------------------------------------------
 
 using Rng = std::mt19937;

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,7 @@
 #include "kdspace/io/vectors.hpp"
 #include "kdspace/metric.hpp"
 #include "kdspace/points/detail/parallel.hpp"
+#include "kdspace/points/point_forest.hpp"
 #include "kdspace/points/point_tree.hpp"
 #include "options.hpp"
 #include "progress.hpp"
@@ -29,13 +31,22 @@ enum class Mode { knn, radius };
 
 const char* const knn_usage =
     R"(usage: kdspace knn --base FILE --query FILE -k K --out IDS.ivecs [--distances D.fvecs]
-                   [build options] [--eps E] [--threads T] [--stats]
+                   [build options] [--eps E | --forest T [--checks C] | --recall R [--forest T]]
+                   [--threads T] [--stats]
 Finds the K nearest base points of every query point.
 
   -k K                 a whole number >= 1; -k 0 is a usage error (exit 2), K above the number of
                        base points an error (exit 1), never silently shortened
-  --eps E              approximate: the i-th result within (1+E) of the true i-th (default 0: exact)
-  --forest, --checks, --recall: not available yet
+  --eps E              approximate, on the exact tree: the i-th result within (1+E) of the true
+                       i-th (default 0: exact)
+  --forest T           approximate, for high dimensions: T randomized kd-trees (1..1024) searched
+                       together, best bin first, l2 only; the distances returned are exact
+  --checks C           with --forest: points scored per query (default 256); more is slower and
+                       finds more of the true neighbours
+  --recall R           tune the forest (T trees, default 8) for a mean recall@K of R (0 < R <= 1)
+                       on sample base points, then search with the setting found
+                       With --forest or --recall, --stats adds trees, checks, and the recall
+                       measured on up to 200 of the queries against exact answers.
 )";
 
 const char* const radius_usage =
@@ -77,6 +88,9 @@ struct SearchJob {
   double radius = 0;
   std::size_t max_results = std::numeric_limits<std::size_t>::max();
   double eps = 0;
+  std::size_t forest_trees = 0;  // 0: the exact tree
+  std::size_t checks = 256;
+  double recall = 0;             // 0: no tuning
   unsigned threads = 0;
   bool stats = false;
 };
@@ -88,13 +102,32 @@ std::vector<OptionSpec> option_specs(Mode mode) {
   if (mode == Mode::knn) {
     specs.push_back({"-k"});
     specs.push_back({"--eps"});
-    for (const char* later : {"--forest", "--checks", "--recall"})
-      specs.push_back({later, true, "not available yet"});
+    specs.push_back({"--forest"});
+    specs.push_back({"--checks"});
+    specs.push_back({"--recall"});
   } else {
     specs.push_back({"-r"});
     specs.push_back({"--max-results"});
   }
   return specs;
+}
+
+// --forest, --checks, --recall: which approximate search, and the rules that keep them apart.
+void parse_forest_options(const Options& o, SearchJob& job) {
+  const bool forest = o.has("--forest"), tune = o.has("--recall");
+  if (!forest && !tune) {
+    if (o.has("--checks")) throw UsageError("--checks needs --forest");
+    return;
+  }
+  if (o.has("--eps")) throw UsageError("--eps applies to the exact tree; it cannot be combined with --forest or --recall");
+  job.forest_trees = o.count("--forest", 8, 1, 1024);
+  if (tune) {
+    if (o.has("--checks")) throw UsageError("--checks and --recall exclude each other: --recall chooses the checks");
+    job.recall = o.number("--recall", 0.0, 0.0, 1.0);
+    if (!(job.recall > 0)) throw UsageError("--recall must be in (0, 1], got " + o.text("--recall"));
+  } else {
+    job.checks = o.count("--checks", 256, 1, std::numeric_limits<std::size_t>::max());
+  }
 }
 
 SearchJob parse_job(Mode mode, const std::vector<std::string>& args) {
@@ -108,6 +141,7 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args) {
     if (!o.has("-k")) throw UsageError("missing option -k");
     job.k = o.count("-k", 0, 1, no_limit);
     job.eps = o.number("--eps", 0.0, 0.0, std::numeric_limits<double>::infinity());
+    parse_forest_options(o, job);
   } else {
     if (!o.has("-r")) throw UsageError("missing option -r");
     job.radius = o.number("-r", 0.0, 0.0, std::numeric_limits<double>::infinity());
@@ -128,6 +162,13 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args) {
   job.build.leaf_size = o.count("--leaf", defaults.leaf_size, 1, no_limit);
   job.build.max_depth = o.count("--max-depth", defaults.max_depth, 0, 256);
   job.metric = o.choice("--metric", "l2", {"l2", "l1", "linf"});
+  if (job.forest_trees > 0) {
+    if (job.metric != "l2") throw UsageError("--forest and --recall search with --metric l2 only");
+    for (const char* exact_only : {"--axis", "--position", "--max-depth"})
+      if (o.has(exact_only))
+        throw UsageError(std::string(exact_only) + " applies to the exact tree, not to --forest or --recall");
+    job.build.leaf_size = o.count("--leaf", ForestParams{}.leaf_size, 1, no_limit);
+  }
   job.threads = static_cast<unsigned>(o.count("--threads", 0, 0, 4096));
   job.build.threads = job.threads;
   job.stats = o.has("--stats");
@@ -261,6 +302,124 @@ int run_search(const SearchJob& job) {
   return 0;
 }
 
+// The forest's counterpart of run_search: build (and tune), search, write, and measure the recall on
+// a sample of the queries.
+template <class T>
+int run_forest_search(const SearchJob& job) {
+  io::Matrix<T> base = read_with_progress<T>(job.base);
+  const io::Matrix<T> queries = read_with_progress<T>(job.query);
+  if (queries.cols != base.cols)
+    throw Error(job.query + ": dimension " + std::to_string(queries.cols) + " does not match the base (" +
+                job.base + ": dimension " + std::to_string(base.cols) + ")");
+  if (job.k > base.rows)
+    throw Error("k = " + std::to_string(job.k) + " exceeds the number of base points (" + job.base + " has " +
+                std::to_string(base.rows) + ")");
+
+  ForestParams params;
+  params.trees = job.forest_trees;
+  params.leaf_size = job.build.leaf_size;
+  params.threads = job.threads;
+  Progress build_progress("building the forest", Progress::Kind::elapsed);
+  Clock::time_point start = Clock::now();
+  std::unique_ptr<PointForest<T>> forest;
+  try {
+    forest = std::make_unique<PointForest<T>>(base.data.data(), base.rows, base.cols, params);
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    throw Error(starts_with(what, job.base + ":") ? what : job.base + ": " + what);
+  }
+  const double build_s = seconds_since(start);
+  build_progress.finish();
+  const std::size_t points = base.rows;
+  base = {};
+
+  ForestSearchParams search_params{job.checks, 0};
+  ForestTuning tuning;
+  if (job.recall > 0) {
+    if (job.k + 1 > points)
+      throw Error("--recall: tuning for k = " + std::to_string(job.k) + " needs at least " +
+                  std::to_string(job.k + 1) + " base points (" + job.base + " has " + std::to_string(points) + ")");
+    Progress tune_progress("tuning the forest", Progress::Kind::elapsed);
+    TuneParams tune_params;
+    tune_params.threads = job.threads;
+    tuning = forest->tune(job.recall, job.k, tune_params);
+    tune_progress.finish();
+    search_params = ForestSearchParams{tuning.checks, tuning.trees};
+  }
+
+  QueryStats stats;
+  Progress search_progress("searching", Progress::Kind::elapsed);
+  start = Clock::now();
+  NeighborLists<T> found;
+  try {
+    found = forest->knn_batch(queries.data.data(), queries.rows, job.k, search_params, job.threads, &stats);
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    const std::string prefix = "query row ";
+    throw Error(starts_with(what, prefix) ? job.query + ": row " + what.substr(prefix.size()) : what);
+  }
+  const double query_s = seconds_since(start);
+  search_progress.finish();
+
+  write_results(found, job);
+
+  if (job.stats) {
+    // Recall on up to 200 evenly spaced queries, against exact answers (not part of query_s).
+    const std::size_t sample = std::min<std::size_t>(queries.rows, 200);
+    start = Clock::now();
+    std::vector<T> picked(sample * queries.cols);
+    NeighborLists<T> picked_found;
+    picked_found.offsets.resize(sample + 1);
+    for (std::size_t i = 0; i < sample; ++i) {
+      const std::size_t q = i * queries.rows / sample;
+      std::copy(queries.data.begin() + static_cast<std::ptrdiff_t>(q * queries.cols),
+                queries.data.begin() + static_cast<std::ptrdiff_t>((q + 1) * queries.cols),
+                picked.begin() + static_cast<std::ptrdiff_t>(i * queries.cols));
+      for (const auto& nb : found.row(q)) picked_found.neighbors.push_back(nb);
+      picked_found.offsets[i + 1] = picked_found.neighbors.size();
+    }
+    const NeighborLists<T> exact = forest->knn_exact_batch(picked.data(), sample, job.k, job.threads);
+    const double recall = recall_at_k(picked_found, exact);
+    const double recall_check_s = seconds_since(start);
+
+    const double nq = static_cast<double>(queries.rows);
+    JsonObject json;
+    json.add("command", "knn")
+        .add("method", "forest")
+        .add("points", std::uint64_t{points})
+        .add("dim", std::uint64_t{forest->dim()})
+        .add("queries", std::uint64_t{queries.rows})
+        .add("k", std::uint64_t{job.k})
+        .add("metric", "l2")
+        .add("scalar", sizeof(T) == sizeof(double) ? "double" : "float")
+        .add("threads", detail::resolve_threads(job.threads))
+        .add("trees_built", std::uint64_t{forest->tree_count()})
+        .add("trees", std::uint64_t{search_params.trees == 0 ? forest->tree_count() : search_params.trees})
+        .add("checks", std::uint64_t{search_params.checks})
+        .add("build_s", build_s);
+    if (job.recall > 0) {
+      json.add("target_recall", job.recall)
+          .add("tune_s", tuning.seconds)
+          .add("tuning_recall", tuning.tuning_recall)
+          .add("validation_recall", tuning.validation_recall)
+          .add("settings_tried", std::uint64_t{tuning.settings_tried});
+    }
+    json.add("query_s", query_s)
+        .add("queries_per_s", query_s > 0 ? nq / query_s : std::numeric_limits<double>::infinity())
+        .add("recall", recall)
+        .add("recall_queries", std::uint64_t{sample})
+        .add("recall_check_s", recall_check_s)
+        .add("depth", std::uint64_t{forest->depth()})
+        .add("leaves", std::uint64_t{forest->leaf_count()})
+        .add("nodes", std::uint64_t{forest->node_count()})
+        .add("index_bytes", std::uint64_t{forest->index_bytes()})
+        .add("nodes_visited_per_query", static_cast<double>(stats.nodes_visited) / nq)
+        .add("points_visited_per_query", static_cast<double>(stats.points_visited) / nq);
+    std::printf("%s\n", json.str().c_str());
+  }
+  return 0;
+}
+
 template <class T>
 struct Type {
   using type = T;
@@ -289,6 +448,10 @@ int run_search_command(Mode mode, const std::vector<std::string>& args) {
     // An unknown extension fails now, not after reading the base.
     io::format_from_path(job.base);
     io::format_from_path(job.query);
+    if (job.forest_trees > 0) {
+      if (io::stores_double(job.base)) return run_forest_search<double>(job);
+      return run_forest_search<float>(job);
+    }
     return with_tree_type(job, [&](auto scalar, auto metric) {
       return run_search<typename decltype(scalar)::type, typename decltype(metric)::type>(job);
     });

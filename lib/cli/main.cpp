@@ -22,7 +22,7 @@ kdspace --version | --help
 build options: --axis cycle|spread  --position median|middle|sliding  --leaf N  --max-depth D  --metric l2|l1|linf
                (defaults: spread, median, 16, 64, l2)
 approximate:   --eps E (exact tree, (1+E) bound)  |  --forest T --checks C (randomized forest)  |  --recall R (tune the forest, then search)
-               --forest, --checks and --recall are not available yet
+               (--forest and --recall: l2 only; distances returned are exact; see 'kdspace knn --help')
 
 Files: .fvecs .ivecs .bvecs (ANN benchmark convention), .csv (optional header line), .npy (2-D float32/float64),
   chosen by the extension. A .csv or float64 .npy base is searched in double precision, any other base in

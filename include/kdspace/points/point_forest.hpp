@@ -1,0 +1,202 @@
+// PointForest<T>: approximate Euclidean k-NN for high-dimensional data (image and audio descriptors)
+// by several randomized kd-trees searched together, best bin first, within a budget of scored points.
+//
+// How it works.
+//  - Build: the data's mean and principal directions are computed (covariance of a sample, Eigen's
+//    self-adjoint eigensolver), and every point is projected onto the `projected_dims` leading
+//    directions. Each tree splits those projected coordinates: at each node the axis is drawn at
+//    random among the `candidate_axes` of largest variance (measured on a sample of the node's
+//    points), the position is the median. Trees differ only in their random draws, made by a
+//    generator seeded with (seed, tree number): the forest is the same for any thread count.
+//  - Search: the query is projected once. Every tree is descended to its leaf; each branch not taken
+//    goes into one priority queue shared by all trees, keyed by the distance from the query to the
+//    branch's cell (a true lower bound in the projected space, updated one axis at a time). Branches
+//    are then taken from the queue, nearest first, until `checks` points have been scored (and k are
+//    in hand) or no cell can hold a closer point. A point met in several trees is scored once.
+//  - Points are scored with internal_distance() on the original coordinates, never the projected
+//    ones: every returned distance is exact, and with an unlimited budget the answer is the exact
+//    k-NN (same distances as brute_force_knn() and PointTree, ties by smaller index). The pruning
+//    test allows for the rounding of the projection (a margin from the data's extent), so it never
+//    drops a cell that could hold a neighbour.
+//
+// Memory: a copy of the points (n * dim * sizeof(T)), the original index of each (4 bytes a point),
+// and per tree the leaf order of the points (4 bytes a point) and its nodes (16 bytes each, about
+// 2n / leaf_size of them); plus the projection (dim * projected_dims doubles). memory_bytes() gives
+// the exact figure. The projected coordinates are only needed while building.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <type_traits>
+#include <vector>
+
+#include "kdspace/error.hpp"
+#include "kdspace/points/neighbor.hpp"
+
+namespace kdspace {
+
+struct ForestParams {
+  /// Number of randomized trees (>= 1). A search may use fewer of them (ForestSearchParams::trees).
+  std::size_t trees = 4;
+  /// A node with at most this many points becomes a leaf.
+  std::size_t leaf_size = 8;
+  /// Rotate the data onto its principal directions before splitting (true), or split the original
+  /// axes (false; then projected_dims is the dimension itself).
+  bool pca = true;
+  /// Leading principal directions the trees split on (1..64); 0 = min(dim, 24).
+  std::size_t projected_dims = 0;
+  /// At each node the split axis is drawn among this many axes of largest variance (>= 1).
+  std::size_t candidate_axes = 5;
+  /// Points of a node whose variance chooses its axis (at most; >= 2).
+  std::size_t variance_sample = 64;
+  /// Points whose covariance gives the principal directions (at most; all when n is smaller).
+  std::size_t pca_sample = 20000;
+  /// Seed of the random draws; the same seed gives the same forest.
+  std::uint64_t seed = 1;
+  /// Threads for the build; 0 = all hardware threads. The forest does not depend on it.
+  unsigned threads = 1;
+};
+
+/// Unlimited check budget: the search runs until no cell can hold a closer point (exact answer).
+inline constexpr std::size_t unlimited_checks = static_cast<std::size_t>(-1);
+
+struct ForestSearchParams {
+  /// Points scored per query before the search stops (>= 1; it goes on until k are in hand).
+  std::size_t checks = 256;
+  /// Trees searched: the first `trees` of the forest; 0 = all.
+  std::size_t trees = 0;
+};
+
+/// A (trees, checks) setting chosen by PointForest::tune(), with what was measured for it.
+struct ForestTuning {
+  std::size_t trees = 0;
+  std::size_t checks = 0;
+  double target_recall = 0;
+  double tuning_recall = 0;      ///< mean recall@k on the queries it was chosen with
+  double validation_recall = 0;  ///< mean recall@k on held-out queries, not used to choose
+  double queries_per_s = 0;      ///< single thread, on the tuning queries
+  std::size_t tuning_queries = 0;
+  std::size_t validation_queries = 0;
+  std::size_t settings_tried = 0;
+  double seconds = 0;  ///< wall time of the whole tuning, exact answers included
+};
+
+struct TuneParams {
+  /// Base points used as queries to choose the setting, and as many again to validate it (each is
+  /// left out of its own answers).
+  std::size_t sample_queries = 200;
+  /// Largest budget tried; 0 = the number of points (an exhaustive search always reaches any recall).
+  std::size_t max_checks = 0;
+  std::uint64_t seed = 7;
+  /// Threads for the exact answers of the sample; the timed searches run on one thread.
+  unsigned threads = 0;
+};
+
+template <class T>
+class PointForest {
+  static_assert(std::is_same_v<T, float> || std::is_same_v<T, double>, "PointForest holds float or double");
+
+ public:
+  using Scalar = T;
+
+  /// 16 bytes. Inner node: the tight bounds of its children along `axis` (a projected axis); its
+  /// left child is the next node, its right child at `link`. Leaf: points [link, link + count) of
+  /// the tree's leaf order.
+  struct Node {
+    static constexpr std::uint32_t leaf_bit = 0x80000000u;
+    float left_max;
+    float right_min;
+    std::uint32_t link;
+    std::uint32_t info;  ///< axis (inner) or leaf_bit | count (leaf)
+    bool is_leaf() const { return (info & leaf_bit) != 0; }
+    std::uint32_t axis() const { return info; }
+    std::uint32_t count() const { return info & ~leaf_bit; }
+  };
+
+  /// Builds from n points of `dim` coordinates, row-major. Throws Error for n = 0, dim = 0,
+  /// non-finite coordinates, n >= 2^30 and out-of-range parameters.
+  PointForest(const T* rows, std::size_t n, std::size_t dim, const ForestParams& params = {});
+
+  std::size_t size() const { return ids_.size(); }
+  std::size_t dim() const { return dim_; }
+  std::size_t tree_count() const { return trees_.size(); }
+  std::size_t projected_dims() const { return projected_dims_; }
+  /// Deepest leaf over all trees.
+  std::size_t depth() const;
+  std::size_t leaf_count() const;
+  std::size_t node_count() const;
+  std::size_t memory_bytes() const;
+  /// Bytes held besides the copy of the points.
+  std::size_t index_bytes() const;
+  const ForestParams& params() const { return params_; }
+
+  /// The k nearest points found within the budget, in ascending (true) distance, ties by ascending
+  /// index; always k of them (1 <= k <= size(), else Error). Distances are exact.
+  std::vector<Neighbor<T>> knn(const T* q, std::size_t k, const ForestSearchParams& search = {},
+                               QueryStats* stats = nullptr) const;
+
+  /// nq queries, row-major, on `threads` threads (0 = all); the same answers as one thread.
+  NeighborLists<T> knn_batch(const T* queries, std::size_t nq, std::size_t k, const ForestSearchParams& search = {},
+                             unsigned threads = 0, QueryStats* stats = nullptr) const;
+
+  /// The exact k-NN of each query by scoring every point (blocked matrix products with an exact
+  /// re-check, as PointTree's BatchMethod::scan): the reference answers for recall.
+  NeighborLists<T> knn_exact_batch(const T* queries, std::size_t nq, std::size_t k, unsigned threads = 0) const;
+
+  /// The cheapest (trees, checks) whose mean recall@k reaches `target_recall` (in (0, 1]) on a
+  /// sample of the base points used as queries, each left out of its own answers; cheapest by
+  /// measured time. Exact answers come from the blocked scan. The setting is then checked on as many
+  /// other sample points (validation_recall); if it falls short there, the budget is doubled until
+  /// it does not (or reaches max_checks). Deterministic choice of sample for a given seed.
+  ForestTuning tune(double target_recall, std::size_t k, const TuneParams& params = {}) const;
+
+  /// Nodes of tree t, depth first (read-only; for tools and tests).
+  const std::vector<Node>& nodes(std::size_t t) const { return trees_.at(t).nodes; }
+
+ private:
+  struct Tree {
+    std::vector<Node> nodes;             // depth first, nodes[0] the root
+    std::vector<std::uint32_t> order;    // rows of points_ in this tree's leaf order
+    std::size_t depth = 0;
+    std::size_t leaves = 0;
+  };
+  struct Scratch;
+
+  void search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch, QueryStats& stats,
+              Neighbor<T>* out) const;
+  void check_query(const T* q, const char* what, std::size_t row) const;
+
+  std::size_t dim_ = 0;
+  std::size_t projected_dims_ = 0;
+  ForestParams params_;
+  std::vector<T> points_;             // copy of the points, rows in the first tree's leaf order
+  std::vector<std::uint32_t> ids_;    // original index of each row of points_
+  std::vector<double> mean_;          // dim
+  std::vector<double> projection_;    // dim x projected_dims, row-major: column j = direction j
+  std::vector<Tree> trees_;
+  double extent_ = 0;                 // largest |x - mean| over the points
+};
+
+/// Mean recall@k of `found` against `exact` (row by row, the same k in both): the share of the k
+/// returned points that are no farther than the true k-th nearest (so ties count as found).
+template <class T>
+double recall_at_k(const NeighborLists<T>& found, const NeighborLists<T>& exact) {
+  if (found.rows() != exact.rows()) throw Error("recall_at_k: different numbers of queries");
+  if (found.rows() == 0) return 1.0;
+  double sum = 0;
+  for (std::size_t q = 0; q < found.rows(); ++q) {
+    const auto truth = exact.row(q);
+    const auto row = found.row(q);
+    if (truth.size() == 0 || row.size() != truth.size()) throw Error("recall_at_k: rows of different lengths");
+    const T kth = truth[truth.size() - 1].distance;
+    std::size_t hits = 0;
+    for (const auto& nb : row) hits += nb.distance <= kth ? 1 : 0;
+    sum += static_cast<double>(hits) / static_cast<double>(truth.size());
+  }
+  return sum / static_cast<double>(found.rows());
+}
+
+extern template class PointForest<float>;
+extern template class PointForest<double>;
+
+}  // namespace kdspace

@@ -1,0 +1,493 @@
+// PointForest: the build (principal directions, projection, randomized trees) and the best-bin-first
+// search over all trees. The design is described at the top of include/kdspace/points/point_forest.hpp.
+#include "kdspace/points/point_forest.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <string>
+
+#include "kdspace/error.hpp"
+#include "kdspace/metric.hpp"
+#include "kdspace/points/detail/parallel.hpp"
+#include "kdspace/points/detail/result_sets.hpp"
+
+namespace kdspace {
+namespace {
+
+using RowMatrixd = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+/// The generator of tree t: seeded from (seed, t) so each tree's draws do not depend on the others
+/// or on the thread that builds it.
+std::mt19937_64 tree_generator(std::uint64_t seed, std::size_t tree) {
+  std::seed_seq seq{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(seed >> 32),
+                    static_cast<std::uint32_t>(tree), 0x6b64u};
+  return std::mt19937_64(seq);
+}
+
+/// Builds one tree over the projected coordinates `proj` (n rows of m floats).
+class TreeBuilder {
+ public:
+  template <class Node>
+  struct Result {
+    std::vector<Node> nodes;
+    std::vector<std::uint32_t> order;
+    std::size_t depth = 0;
+    std::size_t leaves = 0;
+  };
+
+  TreeBuilder(const float* proj, std::size_t n, std::size_t m, const ForestParams& params, std::size_t tree)
+      : proj_(proj), n_(n), m_(m), params_(params), rng_(tree_generator(params.seed, tree)),
+        variance_(m), axes_(m) {}
+
+  template <class Node>
+  Result<Node> build() {
+    Result<Node> out;
+    out.order.resize(n_);
+    std::iota(out.order.begin(), out.order.end(), 0u);
+    out.nodes.reserve(2 * n_ / std::max<std::size_t>(1, params_.leaf_size) + 1);
+    split(out, 0, n_, 0);
+    return out;
+  }
+
+ private:
+  float coord(std::uint32_t row, std::size_t axis) const { return proj_[row * m_ + axis]; }
+
+  template <class Node>
+  void make_leaf(Result<Node>& out, std::size_t first, std::size_t last, std::size_t depth) {
+    out.nodes.push_back(Node{0, 0, static_cast<std::uint32_t>(first), Node::leaf_bit | static_cast<std::uint32_t>(last - first)});
+    out.leaves += 1;
+    out.depth = std::max(out.depth, depth);
+  }
+
+  // The split axis of the node [first, last): drawn among the axes of largest variance on a sample
+  // of its points; if the sample shows no variance, the axis of largest spread over all of them.
+  // Returns m_ when every axis is flat (the node becomes a leaf).
+  std::size_t choose_axis(const std::uint32_t* rows, std::size_t count) {
+    const std::size_t sample = std::min(count, params_.variance_sample);
+    std::fill(variance_.begin(), variance_.end(), 0.0);
+    std::vector<double>& mean = axes_mean_;
+    mean.assign(m_, 0.0);
+    for (std::size_t s = 0; s < sample; ++s) {
+      const std::uint32_t row = rows[s * count / sample];
+      for (std::size_t a = 0; a < m_; ++a) mean[a] += coord(row, a);
+    }
+    for (std::size_t a = 0; a < m_; ++a) mean[a] /= static_cast<double>(sample);
+    for (std::size_t s = 0; s < sample; ++s) {
+      const std::uint32_t row = rows[s * count / sample];
+      for (std::size_t a = 0; a < m_; ++a) {
+        const double dv = coord(row, a) - mean[a];
+        variance_[a] += dv * dv;
+      }
+    }
+    std::iota(axes_.begin(), axes_.end(), std::size_t{0});
+    const std::size_t candidates = std::min(params_.candidate_axes, m_);
+    std::partial_sort(axes_.begin(), axes_.begin() + static_cast<long>(candidates), axes_.end(),
+                      [&](std::size_t a, std::size_t b) { return variance_[a] > variance_[b] || (variance_[a] == variance_[b] && a < b); });
+    std::size_t usable = 0;
+    while (usable < candidates && variance_[axes_[usable]] > 0) ++usable;
+    if (usable > 0) return axes_[std::uniform_int_distribution<std::size_t>(0, usable - 1)(rng_)];
+    // The sample is flat: look at every point.
+    std::size_t best = m_;
+    float best_spread = 0;
+    for (std::size_t a = 0; a < m_; ++a) {
+      float lo = coord(rows[0], a), hi = lo;
+      for (std::size_t i = 1; i < count; ++i) {
+        lo = std::min(lo, coord(rows[i], a));
+        hi = std::max(hi, coord(rows[i], a));
+      }
+      if (hi - lo > best_spread) best_spread = hi - lo, best = a;
+    }
+    return best;
+  }
+
+  template <class Node>
+  void split(Result<Node>& out, std::size_t first, std::size_t last, std::size_t depth) {
+    const std::size_t count = last - first;
+    std::uint32_t* rows = out.order.data() + first;
+    if (count <= params_.leaf_size) return make_leaf(out, first, last, depth);
+    const std::size_t axis = choose_axis(rows, count);
+    if (axis == m_) return make_leaf(out, first, last, depth);  // all projected points coincide
+    auto less = [&](std::uint32_t a, std::uint32_t b) { return coord(a, axis) < coord(b, axis); };
+    std::size_t mid = count / 2;
+    std::nth_element(rows, rows + mid, rows + count, less);
+    // Equal coordinates may straddle the median; the split is at mid either way, and the bounds
+    // below are the true ones, so the children's slabs may touch but are correct.
+    float left_max = coord(rows[0], axis);
+    for (std::size_t i = 1; i < mid; ++i) left_max = std::max(left_max, coord(rows[i], axis));
+    const float right_min = coord(rows[mid], axis);
+    const std::size_t id = out.nodes.size();
+    out.nodes.push_back(Node{left_max, right_min, 0, static_cast<std::uint32_t>(axis)});
+    split(out, first, first + mid, depth + 1);
+    out.nodes[id].link = static_cast<std::uint32_t>(out.nodes.size());
+    split(out, first + mid, last, depth + 1);
+  }
+
+  const float* proj_;
+  std::size_t n_, m_;
+  const ForestParams& params_;
+  std::mt19937_64 rng_;
+  std::vector<double> variance_;
+  std::vector<std::size_t> axes_;
+  std::vector<double> axes_mean_;
+};
+
+void check_params(const ForestParams& p, std::size_t dim) {
+  if (p.trees == 0) throw Error("forest: trees must be at least 1");
+  if (p.trees > 1024) throw Error("forest: at most 1024 trees, got " + std::to_string(p.trees));
+  if (p.leaf_size == 0) throw Error("forest: leaf_size must be at least 1");
+  if (p.pca && p.projected_dims > 64)
+    throw Error("forest: projected_dims must be at most 64, got " + std::to_string(p.projected_dims));
+  if (p.candidate_axes == 0) throw Error("forest: candidate_axes must be at least 1");
+  if (p.variance_sample < 2) throw Error("forest: variance_sample must be at least 2");
+  if (p.pca && p.pca_sample < 2) throw Error("forest: pca_sample must be at least 2");
+  (void)dim;
+}
+
+}  // namespace
+
+template <class T>
+PointForest<T>::PointForest(const T* rows, std::size_t n, std::size_t dim, const ForestParams& params)
+    : dim_(dim), params_(params) {
+  if (dim == 0) throw Error("points have dimension 0");
+  if (n == 0) throw Error("no points: the data is empty");
+  if (n >= (std::size_t{1} << 30)) throw Error("too many points: " + std::to_string(n) + " (at most 2^30 - 1)");
+  if (rows == nullptr) throw Error("points: null pointer");
+  check_params(params, dim);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t a = 0; a < dim; ++a)
+      if (!std::isfinite(rows[i * dim + a]))
+        throw Error("row " + std::to_string(i + 1) + ": coordinate " + std::to_string(a + 1) + " is not finite (" +
+                    std::to_string(rows[i * dim + a]) + ")");
+
+  // Mean, and the largest distance from it (for the pruning margin).
+  mean_.assign(dim, 0.0);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t a = 0; a < dim; ++a) mean_[a] += static_cast<double>(rows[i * dim + a]);
+  for (double& v : mean_) v /= static_cast<double>(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    double s = 0;
+    for (std::size_t a = 0; a < dim; ++a) {
+      const double v = static_cast<double>(rows[i * dim + a]) - mean_[a];
+      s += v * v;
+    }
+    extent_ = std::max(extent_, std::sqrt(s));
+  }
+
+  // Principal directions, from the covariance of an evenly spaced sample.
+  const std::size_t m = params.pca ? (params.projected_dims ? std::min(params.projected_dims, dim) : std::min<std::size_t>(dim, 24))
+                                   : dim;
+  projected_dims_ = m;
+  if (params.pca) {
+    const std::size_t sample = std::min(n, params.pca_sample);
+    RowMatrixd centred(static_cast<long>(sample), static_cast<long>(dim));
+    for (std::size_t s = 0; s < sample; ++s) {
+      const std::size_t i = s * n / sample;
+      for (std::size_t a = 0; a < dim; ++a) centred(static_cast<long>(s), static_cast<long>(a)) = rows[i * dim + a] - mean_[a];
+    }
+    const Eigen::MatrixXd covariance = (centred.transpose() * centred) / static_cast<double>(sample);
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> solver(covariance);
+    if (solver.info() != Eigen::Success) throw Error("forest: the principal directions could not be computed");
+    // Eigenvalues ascend: the leading directions are the last columns.
+    projection_.resize(dim * m);
+    for (std::size_t a = 0; a < dim; ++a)
+      for (std::size_t j = 0; j < m; ++j)
+        projection_[a * m + j] = solver.eigenvectors()(static_cast<long>(a), static_cast<long>(dim - 1 - j));
+  }
+
+  // Projected coordinates, as floats, in blocks of rows.
+  std::vector<float> proj(n * m);
+  constexpr std::size_t block = 1024;
+  detail::parallel_for((n + block - 1) / block, params.threads, 1, [&](std::size_t b0, std::size_t b1, unsigned) {
+    RowMatrixd centred;
+    for (std::size_t b = b0; b < b1; ++b) {
+      const std::size_t first = b * block, count = std::min(block, n - first);
+      centred.resize(static_cast<long>(count), static_cast<long>(dim));
+      for (std::size_t r = 0; r < count; ++r)
+        for (std::size_t a = 0; a < dim; ++a)
+          centred(static_cast<long>(r), static_cast<long>(a)) = rows[(first + r) * dim + a] - mean_[a];
+      if (params.pca) {
+        const Eigen::Map<const RowMatrixd> directions(projection_.data(), static_cast<long>(dim), static_cast<long>(m));
+        const RowMatrixd projected = centred * directions;
+        for (std::size_t r = 0; r < count; ++r)
+          for (std::size_t j = 0; j < m; ++j)
+            proj[(first + r) * m + j] = static_cast<float>(projected(static_cast<long>(r), static_cast<long>(j)));
+      } else {
+        for (std::size_t r = 0; r < count; ++r)
+          for (std::size_t j = 0; j < m; ++j)
+            proj[(first + r) * m + j] = static_cast<float>(centred(static_cast<long>(r), static_cast<long>(j)));
+      }
+    }
+  });
+
+  // The trees, each from its own generator.
+  trees_.resize(params.trees);
+  detail::parallel_for(params.trees, params.threads, 1, [&](std::size_t t0, std::size_t t1, unsigned) {
+    for (std::size_t t = t0; t < t1; ++t) {
+      auto built = TreeBuilder(proj.data(), n, m, params, t).template build<Node>();
+      trees_[t].nodes = std::move(built.nodes);
+      trees_[t].nodes.shrink_to_fit();
+      trees_[t].order = std::move(built.order);
+      trees_[t].depth = built.depth;
+      trees_[t].leaves = built.leaves;
+    }
+  });
+
+  // The copy of the points follows the first tree's leaf order; the trees refer to its rows.
+  ids_ = trees_[0].order;
+  std::vector<std::uint32_t> row_of(n);
+  for (std::size_t r = 0; r < n; ++r) row_of[ids_[r]] = static_cast<std::uint32_t>(r);
+  points_.resize(n * dim);
+  for (std::size_t r = 0; r < n; ++r) std::copy(rows + ids_[r] * dim, rows + ids_[r] * dim + dim, points_.begin() + r * dim);
+  for (Tree& tree : trees_)
+    for (std::uint32_t& row : tree.order) row = row_of[row];
+}
+
+template <class T>
+std::size_t PointForest<T>::depth() const {
+  std::size_t d = 0;
+  for (const Tree& t : trees_) d = std::max(d, t.depth);
+  return d;
+}
+
+template <class T>
+std::size_t PointForest<T>::leaf_count() const {
+  std::size_t s = 0;
+  for (const Tree& t : trees_) s += t.leaves;
+  return s;
+}
+
+template <class T>
+std::size_t PointForest<T>::node_count() const {
+  std::size_t s = 0;
+  for (const Tree& t : trees_) s += t.nodes.size();
+  return s;
+}
+
+template <class T>
+std::size_t PointForest<T>::memory_bytes() const {
+  std::size_t bytes = points_.capacity() * sizeof(T) + index_bytes();
+  return bytes;
+}
+
+template <class T>
+std::size_t PointForest<T>::index_bytes() const {
+  std::size_t bytes = ids_.capacity() * sizeof(std::uint32_t) + (mean_.capacity() + projection_.capacity()) * sizeof(double);
+  for (const Tree& t : trees_) bytes += t.nodes.capacity() * sizeof(Node) + t.order.capacity() * sizeof(std::uint32_t);
+  return bytes;
+}
+
+// ---- search ---------------------------------------------------------------------------------------
+
+/// Per-thread working memory of a query: reused from query to query, so a query allocates nothing
+/// once it has grown. `stamp[row] == epoch` marks a row already scored by the current query.
+template <class T>
+struct PointForest<T>::Scratch {
+  struct Branch {
+    double bound;  // squared distance from the projected query to the branch's cell
+    std::uint32_t tree;
+    std::uint32_t node;
+  };
+  // Min-heap on (bound, tree, node): the order does not depend on anything but the query.
+  static bool after(const Branch& a, const Branch& b) {
+    if (a.bound != b.bound) return a.bound > b.bound;
+    if (a.tree != b.tree) return a.tree > b.tree;
+    return a.node > b.node;
+  }
+
+  std::vector<double> query;     // projected query
+  std::vector<double> terms;     // per projected axis, its share of the current cell's bound
+  std::vector<std::uint32_t> touched;
+  std::vector<Branch> heap;
+  std::vector<std::uint32_t> stamp;
+  std::uint32_t epoch = 0;
+  std::vector<detail::Candidate<T>> results;
+
+  void start(std::size_t n, std::size_t m) {
+    if (stamp.size() != n) stamp.assign(n, 0), epoch = 0;
+    if (++epoch == 0) std::fill(stamp.begin(), stamp.end(), 0u), epoch = 1;
+    query.resize(m);
+    terms.assign(m, 0.0);
+    heap.clear();
+  }
+};
+
+template <class T>
+void PointForest<T>::check_query(const T* q, const char* what, std::size_t row) const {
+  if (q == nullptr) throw Error(std::string(what) + ": null pointer");
+  for (std::size_t a = 0; a < dim_; ++a)
+    if (!std::isfinite(q[a]))
+      throw Error(std::string(what) + (row ? " row " + std::to_string(row) : std::string()) + ": coordinate " +
+                  std::to_string(a + 1) + " is not finite (" + std::to_string(q[a]) + ")");
+}
+
+namespace {
+void check_search(const ForestSearchParams& s, std::size_t k, std::size_t n) {
+  if (k == 0) throw Error("k must be at least 1");
+  if (k > n) throw Error("k = " + std::to_string(k) + " exceeds the number of points (" + std::to_string(n) + ")");
+  if (s.checks == 0) throw Error("checks must be at least 1");
+}
+}  // namespace
+
+template <class T>
+void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& s,
+                            QueryStats& stats, Neighbor<T>* out) const {
+  using Branch = typename Scratch::Branch;
+  const std::size_t n = size(), d = dim_, m = projected_dims_;
+  s.start(n, m);
+
+  // Project the query (in double).
+  double q_norm2 = 0;
+  for (std::size_t j = 0; j < m; ++j) s.query[j] = 0;
+  for (std::size_t a = 0; a < d; ++a) {
+    const double v = static_cast<double>(q[a]) - mean_[a];
+    q_norm2 += v * v;
+    if (params_.pca) {
+      const double* direction_row = projection_.data() + a * m;
+      for (std::size_t j = 0; j < m; ++j) s.query[j] += v * direction_row[j];
+    } else {
+      s.query[a] = v;
+    }
+  }
+
+  // Pruning margin. A point p of a cell whose projected bound is B satisfies
+  //   |p - q| >= sqrt(B - abs_err) - slack,
+  // where slack covers the projected coordinates' rounding to float (the split bounds are such
+  // floats) and the double-precision projection, and abs_err the rounding of the incremental bound.
+  // The computed internal distance may be smaller than |p - q|^2 by the relative error `shrink`,
+  // and by `underflow` where tiny coordinates make it flush towards zero.
+  const double reach = extent_ + std::sqrt(q_norm2);
+  const double slack = std::sqrt(static_cast<double>(m)) *
+                       (extent_ * std::numeric_limits<float>::epsilon() + reach * 1e-10);
+  const double abs_err = 1e-12 * reach * reach;
+  const double shrink = 1.0 - 4.0 * static_cast<double>(d + 2) * std::numeric_limits<T>::epsilon();
+  const double underflow = 4.0 * static_cast<double>(d + 2) * static_cast<double>(std::numeric_limits<T>::min());
+  auto prunable = [&](double bound, T kth) {
+    if (!std::isfinite(static_cast<double>(kth))) return false;
+    const double lower = std::sqrt(std::max(0.0, bound - abs_err)) - slack;
+    return lower > 0 && lower * lower * shrink - underflow > static_cast<double>(kth);
+  };
+
+  detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), s.results);
+  const std::size_t budget = search.checks;
+  std::size_t checks = 0;
+
+  // Descends from `id` (whose cell bound is `bound`, s.terms holding its per-axis shares) to a leaf,
+  // queueing the far child at every step, then scores the leaf.
+  auto descend = [&](std::uint32_t tree_id, std::uint32_t id, double bound) {
+    const Tree& tree = trees_[tree_id];
+    for (;;) {
+      const Node& node = tree.nodes[id];
+      ++stats.nodes_visited;
+      if (node.is_leaf()) {
+        const std::uint32_t* row = tree.order.data() + node.link;
+        for (std::uint32_t i = 0; i < node.count(); ++i) {
+          const std::uint32_t r = row[i];
+          if (s.stamp[r] == s.epoch) continue;
+          s.stamp[r] = s.epoch;
+          ++checks;
+          results.offer(internal_distance<L2>(q, points_.data() + std::size_t{r} * d, d), ids_[r]);
+        }
+        return;
+      }
+      const std::uint32_t axis = node.axis();
+      const double x = s.query[axis];
+      const double to_left = x - node.left_max;
+      const double to_right = node.right_min - x;
+      const bool left_first = to_left <= to_right;
+      const double far_gap = left_first ? to_right : to_left;
+      const double far_bound = bound - s.terms[axis] + far_gap * far_gap;
+      if (!prunable(far_bound, results.bound())) {
+        s.heap.push_back(Branch{far_bound, tree_id, left_first ? node.link : id + 1});
+        std::push_heap(s.heap.begin(), s.heap.end(), Scratch::after);
+      }
+      id = left_first ? id + 1 : node.link;
+    }
+  };
+
+  // Walks from the root of a tree to `target`, setting s.terms to the target's cell and returning
+  // its bound: the same arithmetic, in the same order, as the descent that queued it.
+  auto enter = [&](std::uint32_t tree_id, std::uint32_t target) {
+    const Tree& tree = trees_[tree_id];
+    double bound = 0;
+    std::uint32_t id = 0;
+    while (id != target) {
+      const Node& node = tree.nodes[id];
+      const std::uint32_t axis = node.axis();
+      const double x = s.query[axis];
+      const double to_left = x - node.left_max;
+      const double to_right = node.right_min - x;
+      const bool left_first = to_left <= to_right;
+      const bool go_left = target < node.link;
+      if (go_left != left_first) {  // the far child: its axis share grows
+        const double far_gap = left_first ? to_right : to_left;
+        bound = bound - s.terms[axis] + far_gap * far_gap;
+        if (s.terms[axis] == 0) s.touched.push_back(axis);
+        s.terms[axis] = far_gap * far_gap;
+      }
+      id = go_left ? id + 1 : node.link;
+    }
+    return bound;
+  };
+
+  const std::size_t trees_used = search.trees == 0 ? trees_.size() : std::min(search.trees, trees_.size());
+  for (std::size_t t = 0; t < trees_used; ++t) descend(static_cast<std::uint32_t>(t), 0, 0.0);
+  while (!s.heap.empty()) {
+    if (checks >= budget && results.full()) break;
+    const Branch next = s.heap.front();
+    if (prunable(next.bound, results.bound())) break;  // the queue holds nothing nearer
+    std::pop_heap(s.heap.begin(), s.heap.end(), Scratch::after);
+    s.heap.pop_back();
+    const double bound = enter(next.tree, next.node);
+    descend(next.tree, next.node, bound);
+    for (std::uint32_t axis : s.touched) s.terms[axis] = 0;
+    s.touched.clear();
+  }
+  stats.queries += 1;
+  stats.points_visited += checks;
+  for (const auto& c : results.sorted()) *out++ = Neighbor<T>{c.index, L2::to_distance(c.dist)};
+}
+
+template <class T>
+std::vector<Neighbor<T>> PointForest<T>::knn(const T* q, std::size_t k, const ForestSearchParams& search_params,
+                                             QueryStats* stats) const {
+  check_search(search_params, k, size());
+  check_query(q, "query", 0);
+  thread_local Scratch scratch;
+  QueryStats local;
+  std::vector<Neighbor<T>> out(k);
+  search(q, k, search_params, scratch, local, out.data());
+  if (stats) *stats += local;
+  return out;
+}
+
+template <class T>
+NeighborLists<T> PointForest<T>::knn_batch(const T* queries, std::size_t nq, std::size_t k,
+                                           const ForestSearchParams& search_params, unsigned threads,
+                                           QueryStats* stats) const {
+  check_search(search_params, k, size());
+  if (nq > 0 && queries == nullptr) throw Error("queries: null pointer");
+  for (std::size_t q = 0; q < nq; ++q) check_query(queries + q * dim_, "query", q + 1);
+  NeighborLists<T> out;
+  out.offsets.resize(nq + 1);
+  for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
+  out.neighbors.resize(nq * k);
+  std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
+  detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
+    thread_local Scratch scratch;
+    for (std::size_t q = begin; q < end; ++q)
+      search(queries + q * dim_, k, search_params, scratch, per_worker[worker], out.neighbors.data() + q * k);
+  });
+  if (stats)
+    for (const QueryStats& w : per_worker) *stats += w;
+  return out;
+}
+
+template class PointForest<float>;
+template class PointForest<double>;
+
+}  // namespace kdspace

@@ -1,0 +1,206 @@
+// PointForest: exact answers by the blocked scan, and the choice of (trees, checks) for a target
+// recall.
+//
+// Tuning. Sample base points serve as queries, each left out of its own answers (the search asks for
+// k + 1 neighbours and drops the query point itself), so that no query file is needed and the
+// answers are those of a point not in the data. Half the sample chooses the setting, the other half
+// checks it. For each number of trees (1, 2, 4, ... up to the forest's), the budget doubles from 16
+// until the recall is reached, then a bisection narrows it (recall never falls as the budget grows:
+// a larger budget only continues the same search). Each candidate is timed on one thread; the
+// fastest wins. A number of trees whose search is already slower than the best found stops early.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <string>
+
+#include "kdspace/error.hpp"
+#include "kdspace/points/detail/blocked_scan.hpp"
+#include "kdspace/points/detail/parallel.hpp"
+#include "kdspace/points/point_forest.hpp"
+
+namespace kdspace {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// Row q of a (k + 1)-NN answer without the query point `self` (or without its last entry when
+/// `self` is not in it: more than k duplicates of the query with smaller indices).
+template <class T>
+void drop_self(const NeighborLists<T>& wide, std::size_t q, Index self, Neighbor<T>* out) {
+  const auto row = wide.row(q);
+  bool dropped = false;
+  for (std::size_t i = 0; i < row.size(); ++i) {
+    if (!dropped && row[i].index == self) {
+      dropped = true;
+      continue;
+    }
+    if (!dropped && i + 1 == row.size()) break;  // self not found: the last one goes
+    *out++ = row[i];
+  }
+}
+
+template <class T>
+NeighborLists<T> without_self(const NeighborLists<T>& wide, const std::vector<Index>& self, std::size_t first,
+                              std::size_t k) {
+  NeighborLists<T> out;
+  const std::size_t nq = wide.rows();
+  out.offsets.resize(nq + 1);
+  for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
+  out.neighbors.resize(nq * k);
+  for (std::size_t q = 0; q < nq; ++q) drop_self(wide, q, self[first + q], out.neighbors.data() + q * k);
+  return out;
+}
+
+}  // namespace
+
+template <class T>
+NeighborLists<T> PointForest<T>::knn_exact_batch(const T* queries, std::size_t nq, std::size_t k,
+                                                 unsigned threads) const {
+  if (k == 0) throw Error("k must be at least 1");
+  if (k > size()) throw Error("k = " + std::to_string(k) + " exceeds the number of points (" + std::to_string(size()) + ")");
+  if (nq > 0 && queries == nullptr) throw Error("queries: null pointer");
+  for (std::size_t q = 0; q < nq; ++q) check_query(queries + q * dim_, "query", q + 1);
+  std::vector<T> centre(dim_);
+  for (std::size_t a = 0; a < dim_; ++a) centre[a] = static_cast<T>(mean_[a]);
+  const detail::ScanData<T> data{points_.data(), ids_.data(), size(), dim_, centre.data()};
+  NeighborLists<T> out;
+  out.offsets.resize(nq + 1);
+  for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
+  out.neighbors.resize(nq * k);
+  detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned) {
+    detail::blocked_scan_knn_l2(data, queries + begin * dim_, end - begin, k, out.neighbors.data() + begin * k);
+  });
+  return out;
+}
+
+template <class T>
+ForestTuning PointForest<T>::tune(double target_recall, std::size_t k, const TuneParams& tp) const {
+  const Clock::time_point start = Clock::now();
+  if (!(target_recall > 0 && target_recall <= 1))
+    throw Error("recall must be in (0, 1], got " + std::to_string(target_recall));
+  if (k == 0) throw Error("k must be at least 1");
+  if (k + 1 > size())
+    throw Error("tuning for k = " + std::to_string(k) + " needs at least " + std::to_string(k + 1) +
+                " points (each sample point is left out of its own answers); the forest has " + std::to_string(size()));
+  if (tp.sample_queries == 0) throw Error("tuning: sample_queries must be at least 1");
+
+  // The sample: 2S distinct rows, drawn with the seed.
+  const std::size_t n = size();
+  const std::size_t half = std::max<std::size_t>(1, std::min(tp.sample_queries, n / 2));
+  const std::size_t sample = std::min(n, 2 * half);
+  std::vector<std::uint32_t> rows(n);
+  std::iota(rows.begin(), rows.end(), 0u);
+  std::mt19937_64 rng(tp.seed);
+  for (std::size_t i = 0; i < sample; ++i)
+    std::swap(rows[i], rows[i + std::uniform_int_distribution<std::size_t>(0, n - 1 - i)(rng)]);
+  std::vector<T> queries(sample * dim_);
+  std::vector<Index> self(sample);
+  for (std::size_t i = 0; i < sample; ++i) {
+    std::copy(points_.begin() + rows[i] * dim_, points_.begin() + rows[i] * dim_ + dim_, queries.begin() + i * dim_);
+    self[i] = ids_[rows[i]];
+  }
+  const std::size_t validation_first = half, validation_count = sample - half;
+
+  const NeighborLists<T> exact_wide = knn_exact_batch(queries.data(), sample, k + 1, tp.threads);
+  auto exact_part = [&](std::size_t first, std::size_t count) {
+    NeighborLists<T> part;
+    part.offsets.resize(count + 1);
+    for (std::size_t q = 0; q <= count; ++q) part.offsets[q] = q * k;
+    part.neighbors.resize(count * k);
+    for (std::size_t q = 0; q < count; ++q) drop_self(exact_wide, first + q, self[first + q], part.neighbors.data() + q * k);
+    return part;
+  };
+  const NeighborLists<T> exact_tuning = exact_part(0, half);
+  const NeighborLists<T> exact_validation = exact_part(validation_first, validation_count);
+
+  ForestTuning best;
+  best.target_recall = target_recall;
+  best.tuning_queries = half;
+  best.validation_queries = validation_count;
+  struct Outcome {
+    double recall;
+    double seconds;
+  };
+  // Recall and single-thread time of one setting on [first, first + count) of the sample.
+  auto evaluate = [&](std::size_t trees, std::size_t checks, std::size_t first, std::size_t count,
+                      const NeighborLists<T>& exact) {
+    ++best.settings_tried;
+    const ForestSearchParams params{checks, trees};
+    const Clock::time_point t0 = Clock::now();
+    const NeighborLists<T> wide = knn_batch(queries.data() + first * dim_, count, k + 1, params, 1);
+    const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+    return Outcome{recall_at_k(without_self(wide, self, first, k), exact), seconds};
+  };
+
+  const std::size_t cap = tp.max_checks == 0 ? n : std::min(tp.max_checks, n);
+  std::vector<std::size_t> tree_options;
+  for (std::size_t t = 1; t < tree_count(); t *= 2) tree_options.push_back(t);
+  tree_options.push_back(tree_count());
+
+  double best_seconds = std::numeric_limits<double>::infinity();
+  double best_recall = -1;  // when no setting reaches the target: the one that comes closest
+  for (const std::size_t trees : tree_options) {
+    std::size_t low = 0, high = std::min<std::size_t>(16, cap);
+    Outcome at_high = evaluate(trees, high, 0, half, exact_tuning);
+    bool too_slow = false;
+    while (at_high.recall < target_recall && high < cap) {
+      if (at_high.seconds > best_seconds) {
+        too_slow = true;  // a larger budget only costs more
+        break;
+      }
+      low = high;
+      high = std::min(2 * high, cap);
+      at_high = evaluate(trees, high, 0, half, exact_tuning);
+    }
+    if (too_slow) continue;
+    if (at_high.recall < target_recall) {
+      if (at_high.recall > best_recall && best_seconds == std::numeric_limits<double>::infinity()) {
+        best_recall = at_high.recall;
+        best.trees = trees, best.checks = high, best.tuning_recall = at_high.recall;
+        best.queries_per_s = static_cast<double>(half) / at_high.seconds;
+      }
+      continue;
+    }
+    while (high - low > std::max<std::size_t>(1, high / 8)) {
+      const std::size_t mid = low + (high - low) / 2;
+      const Outcome at_mid = evaluate(trees, mid, 0, half, exact_tuning);
+      if (at_mid.recall >= target_recall) high = mid, at_high = at_mid;
+      else low = mid;
+    }
+    // Time the chosen budget once more; the faster of the two runs counts.
+    const Outcome again = evaluate(trees, high, 0, half, exact_tuning);
+    const double seconds = std::min(at_high.seconds, again.seconds);
+    if (seconds < best_seconds) {
+      best_seconds = seconds;
+      best.trees = trees, best.checks = high, best.tuning_recall = at_high.recall;
+      best.queries_per_s = static_cast<double>(half) / seconds;
+    }
+  }
+
+  // Check on the held-out half; if it falls short, widen the budget until it does not.
+  if (validation_count > 0) {
+    Outcome held_out = evaluate(best.trees, best.checks, validation_first, validation_count, exact_validation);
+    while (held_out.recall < target_recall && best.checks < cap) {
+      best.checks = std::min(2 * best.checks, cap);
+      held_out = evaluate(best.trees, best.checks, validation_first, validation_count, exact_validation);
+      const Outcome tuned = evaluate(best.trees, best.checks, 0, half, exact_tuning);
+      best.tuning_recall = tuned.recall;
+      best.queries_per_s = static_cast<double>(half) / tuned.seconds;
+    }
+    best.validation_recall = held_out.recall;
+  } else {
+    best.validation_recall = best.tuning_recall;
+  }
+  best.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return best;
+}
+
+template NeighborLists<float> PointForest<float>::knn_exact_batch(const float*, std::size_t, std::size_t, unsigned) const;
+template NeighborLists<double> PointForest<double>::knn_exact_batch(const double*, std::size_t, std::size_t,
+                                                                    unsigned) const;
+template ForestTuning PointForest<float>::tune(double, std::size_t, const TuneParams&) const;
+template ForestTuning PointForest<double>::tune(double, std::size_t, const TuneParams&) const;
+
+}  // namespace kdspace
