@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
 # Plots the benchmark results: docs/bench_points.png (exact 10-NN queries/s against dimension, one
 # line per library, uniform and clustered workloads side by side) and docs/bench_rays.png (Mrays/s
-# against the number of boxes, one line per library, primary and random rays side by side, 1 thread).
+# against the number of boxes, one line per library, primary and random rays side by side, 1 thread)
+# and docs/bench_forest.png (approximate 10-NN: queries/s against recall@10, one panel per data set,
+# one line per library and number of trees).
 #
 # usage: bench/plot.sh [RESULTS_DIR [OUT_DIR]]     (defaults: bench/results, docs)
 #
 # Reads RESULTS_DIR/points.jsonl and, when present, RESULTS_DIR/rays.jsonl (the JSON lines of
-# kdspace-bench and kdspace-rays-bench); python3 (standard library only) turns them into .dat files
+# kdspace-bench and kdspace-rays-bench) and RESULTS_DIR/forest.jsonl (kdspace-forest-bench);
+# python3 (standard library only) turns them into .dat files
 # and the plot commands, bench/plot.gp draws them with gnuplot. Without rays.jsonl (or with no
 # 1-thread rays lines in it) only the points picture is made.
 set -euo pipefail
@@ -136,6 +139,47 @@ PYTHON
 
 gnuplot -e "series='$work/series.gp'; out_points='$out/bench_points.png'; out_rays='$out/bench_rays.png'" "$here/plot.gp"
 echo "plot.sh: wrote $out/bench_points.png"
+
+# ---- (c) the forest: queries/s against recall@10, a complete gnuplot script made here -----------------
+if [ -f "$results/forest.jsonl" ]; then
+  python3 - "$results/forest.jsonl" "$work" "$out/bench_forest.png" <<'PYTHON'
+import json, os, sys
+path, work, png = sys.argv[1:4]
+rows = [json.loads(l) for l in open(path) if l.startswith("{")]
+rows = [r for r in rows if r.get("bench") == "forest" and "recall10" in r and "qps" in r]
+datasets = []
+for r in rows:
+    if r["dataset"] not in datasets:
+        datasets.append(r["dataset"])
+colours = {("kdspace", 1): "#fdae6b", ("kdspace", 2): "#fd8d3c", ("kdspace", 4): "#e6550d", ("kdspace", 8): "#a63603",
+           ("flann", 4): "#6baed6", ("flann", 8): "#08519c"}
+script = ["set terminal pngcairo size 1500,900 enhanced font 'DejaVu Sans,11'",
+          f"set output '{png}'",
+          "set grid xtics ytics lc rgb '#dddddd'",
+          "set key bottom left box opaque samplen 3 font ',9'",
+          "set logscale y 10", "set xrange [0.5:1.005]", "set xlabel 'recall@10'", "set ylabel 'queries / s (1 thread)'",
+          f"set multiplot layout {(len(datasets) + 2) // 3},{min(3, len(datasets))} title "
+          "'kdspace-forest-bench: approximate 10-NN, kdspace PointForest vs FLANN KDTreeIndex (checks 16..4096 along each line)' font ',13'"]
+for d in datasets:
+    parts = []
+    for (lib, trees), colour in colours.items():
+        pts = sorted((r["checks"], r["recall10"], r["qps"]) for r in rows if r["dataset"] == d and r["library"] == lib and r["trees"] == trees)
+        if not pts:
+            continue
+        dat = os.path.join(work, f"forest_{d}_{lib}_{trees}.dat".replace("/", "_"))
+        with open(dat, "w") as f:
+            for _, rec, qps in pts:
+                f.write(f"{rec} {qps}\n")
+        dash = 1 if lib == "kdspace" else 2
+        parts.append(f"'{dat}' using 1:2 with linespoints lw 2 pt 7 ps 0.7 dt {dash} lc rgb '{colour}' title '{lib}, {trees} tree{'s' if trees > 1 else ''}'")
+    dim = next(r["dim"] for r in rows if r["dataset"] == d)
+    script.append(f"set title '{os.path.basename(d)} ({dim}-D)'")
+    script.append("plot " + ", ".join(parts))
+script.append("unset multiplot")
+open(os.path.join(work, "forest.gp"), "w").write("\n".join(script) + "\n")
+PYTHON
+  gnuplot "$work/forest.gp" && echo "plot.sh: wrote $out/bench_forest.png"
+fi
 if grep -q '^has_rays = 1' "$work/series.gp"; then
   echo "plot.sh: wrote $out/bench_rays.png"
 else

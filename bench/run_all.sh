@@ -2,7 +2,10 @@
 # Runs the whole benchmark and plots it:
 #   build/bench/bench/kdspace-bench (all point workloads)  -> bench/results/points.md, points.jsonl
 #   build/bench/bench/kdspace-rays-bench, when built       -> bench/results/rays.md, rays.jsonl
-#   bench/plot.sh                                           -> docs/bench_points.png, docs/bench_rays.png
+#   build/bench/bench/kdspace-forest-bench                  -> bench/results/forest.md, forest.jsonl
+#   bench/summary.py                                        -> bench/results/summary.md (points, ratios)
+#   bench/plot.sh                                           -> docs/bench_points.png, docs/bench_rays.png,
+#                                                              docs/bench_forest.png
 #
 # usage: bench/run_all.sh [kdspace-bench options, e.g. --quick or --workload uniform3d]
 # environment: BUILD_DIR (default build/bench), RESULTS_DIR (default bench/results), PLOT_DIR
@@ -21,6 +24,7 @@ results=${RESULTS_DIR:-$root/bench/results}
 plots=${PLOT_DIR:-$root/docs}
 points_bench=$build/bench/kdspace-bench
 rays_bench=$build/bench/kdspace-rays-bench
+forest_bench=$build/bench/kdspace-forest-bench
 mkdir -p "$results"
 
 if [ ! -x "$points_bench" ]; then
@@ -61,5 +65,11 @@ else
   fi
 fi
 
+if [ -x "$forest_bench" ]; then
+  # shellcheck disable=SC2086  # FOREST_BENCH_ARGS is a list of options
+  run_bench forest "$forest_bench" ${FOREST_BENCH_ARGS:-}
+fi
+
+python3 "$here/summary.py" "$results/points.jsonl" > "$results/summary.md" || status=1
 "$here/plot.sh" "$results" "$plots" || status=1
 exit $status

@@ -207,8 +207,14 @@ TEST_CASE("forest: tuning reaches the target recall on queries it never saw", "[
   params.trees = 8;
   params.threads = 2;
   const PointForest<float> forest(pts.data(), n, dim, params);
-  for (double target : {0.8, 0.95}) {
-    const kdspace::ForestTuning tuned = forest.tune(target, k);
+  // Tuned on base points (left out of their own answers), and on 200 fresh queries of the kind.
+  const auto other = make_points<float>(Shape::clustered, n + nq + 200, dim, 101);
+  const std::vector<float> tuning_queries(other.end() - static_cast<std::ptrdiff_t>(200 * dim), other.end());
+  for (double target : {0.8, 0.95})
+  for (bool on_queries : {false, true}) {
+    const kdspace::ForestTuning tuned =
+        on_queries ? forest.tune(target, k, tuning_queries.data(), 200) : forest.tune(target, k);
+    INFO("tuned on " << (on_queries ? "fresh queries" : "base points"));
     INFO("target " << target << ": trees " << tuned.trees << " checks " << tuned.checks << " tuning recall "
                    << tuned.tuning_recall << " validation recall " << tuned.validation_recall << " in "
                    << tuned.seconds << " s, " << tuned.settings_tried << " settings");
@@ -255,6 +261,9 @@ TEST_CASE("forest: bad parameters and inputs get clear errors", "[points][forest
   for (double recall : {0.0, -0.5, 1.01, std::numeric_limits<double>::quiet_NaN()})
     CHECK_THROWS_WITH(forest.tune(recall, 5), Catch::Contains("recall must be in (0, 1]"));
   CHECK_THROWS_WITH(forest.tune(0.9, 100), Catch::Contains("needs at least 101 points"));
+  CHECK_THROWS_WITH(forest.tune(0.9, 101, q.data(), 1), Catch::Contains("needs at least 101"));
+  CHECK_THROWS_WITH(forest.tune(0.9, 5, q.data(), 2), Catch::Contains("query row 2: coordinate 8 is not finite"));
+  CHECK_THROWS_WITH(forest.tune(0.9, 5, q.data(), 0), Catch::Contains("no queries"));
 }
 
 TEST_CASE("forest: tiny data: one point, two points, k = n", "[points][forest]") {

@@ -44,7 +44,8 @@ Finds the K nearest base points of every query point.
   --checks C           with --forest: points scored per query (default 256); more is slower and
                        finds more of the true neighbours
   --recall R           tune the forest (T trees, default 8) for a mean recall@K of R (0 < R <= 1)
-                       on sample base points, then search with the setting found
+                       on a sample of the queries (up to 200 choose the setting, 200 others check
+                       it), then search all queries with the setting found
                        With --forest or --recall, --stats adds trees, checks, and the recall
                        measured on up to 200 of the queries against exact answers.
 )";
@@ -336,13 +337,10 @@ int run_forest_search(const SearchJob& job) {
   ForestSearchParams search_params{job.checks, 0};
   ForestTuning tuning;
   if (job.recall > 0) {
-    if (job.k + 1 > points)
-      throw Error("--recall: tuning for k = " + std::to_string(job.k) + " needs at least " +
-                  std::to_string(job.k + 1) + " base points (" + job.base + " has " + std::to_string(points) + ")");
     Progress tune_progress("tuning the forest", Progress::Kind::elapsed);
     TuneParams tune_params;
     tune_params.threads = job.threads;
-    tuning = forest->tune(job.recall, job.k, tune_params);
+    tuning = forest->tune(job.recall, job.k, queries.data.data(), queries.rows, tune_params);
     tune_progress.finish();
     search_params = ForestSearchParams{tuning.checks, tuning.trees};
   }

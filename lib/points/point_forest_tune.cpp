@@ -75,41 +75,81 @@ NeighborLists<T> PointForest<T>::knn_exact_batch(const T* queries, std::size_t n
   return out;
 }
 
-template <class T>
-ForestTuning PointForest<T>::tune(double target_recall, std::size_t k, const TuneParams& tp) const {
-  const Clock::time_point start = Clock::now();
+namespace {
+void check_tuning(double target_recall, std::size_t k, std::size_t needed, std::size_t n, const TuneParams& tp) {
   if (!(target_recall > 0 && target_recall <= 1))
     throw Error("recall must be in (0, 1], got " + std::to_string(target_recall));
   if (k == 0) throw Error("k must be at least 1");
-  if (k + 1 > size())
-    throw Error("tuning for k = " + std::to_string(k) + " needs at least " + std::to_string(k + 1) +
-                " points (each sample point is left out of its own answers); the forest has " + std::to_string(size()));
+  if (needed > n)
+    throw Error("tuning for k = " + std::to_string(k) + " needs at least " + std::to_string(needed) +
+                " points; the forest has " + std::to_string(n) +
+                (needed > k ? " (each sample point is left out of its own answers)" : ""));
   if (tp.sample_queries == 0) throw Error("tuning: sample_queries must be at least 1");
+}
 
-  // The sample: 2S distinct rows, drawn with the seed.
-  const std::size_t n = size();
-  const std::size_t half = std::max<std::size_t>(1, std::min(tp.sample_queries, n / 2));
-  const std::size_t sample = std::min(n, 2 * half);
+/// `count` distinct numbers of [0, n), drawn with `seed`.
+std::vector<std::uint32_t> draw(std::size_t n, std::size_t count, std::uint64_t seed) {
   std::vector<std::uint32_t> rows(n);
   std::iota(rows.begin(), rows.end(), 0u);
-  std::mt19937_64 rng(tp.seed);
-  for (std::size_t i = 0; i < sample; ++i)
+  std::mt19937_64 rng(seed);
+  for (std::size_t i = 0; i < count; ++i)
     std::swap(rows[i], rows[i + std::uniform_int_distribution<std::size_t>(0, n - 1 - i)(rng)]);
-  std::vector<T> queries(sample * dim_);
-  std::vector<Index> self(sample);
-  for (std::size_t i = 0; i < sample; ++i) {
+  rows.resize(count);
+  return rows;
+}
+}  // namespace
+
+template <class T>
+ForestTuning PointForest<T>::tune(double target_recall, std::size_t k, const TuneParams& tp) const {
+  check_tuning(target_recall, k, k + 1, size(), tp);
+  const std::size_t n = size();
+  const std::size_t half = std::max<std::size_t>(1, std::min(tp.sample_queries, n / 2));
+  const std::vector<std::uint32_t> rows = draw(n, std::min(n, 2 * half), tp.seed);
+  std::vector<T> queries(rows.size() * dim_);
+  std::vector<Index> self(rows.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) {
     std::copy(points_.begin() + rows[i] * dim_, points_.begin() + rows[i] * dim_ + dim_, queries.begin() + i * dim_);
     self[i] = ids_[rows[i]];
   }
+  return tune_on(target_recall, k, queries, self, half, tp);
+}
+
+template <class T>
+ForestTuning PointForest<T>::tune(double target_recall, std::size_t k, const T* user_queries, std::size_t nq,
+                                  const TuneParams& tp) const {
+  check_tuning(target_recall, k, k, size(), tp);
+  if (nq == 0) throw Error("tuning: no queries");
+  if (user_queries == nullptr) throw Error("tuning: queries: null pointer");
+  for (std::size_t q = 0; q < nq; ++q) check_query(user_queries + q * dim_, "query", q + 1);
+  const std::size_t half = std::max<std::size_t>(1, std::min(tp.sample_queries, nq / 2));
+  const std::vector<std::uint32_t> rows = draw(nq, std::min(nq, 2 * half), tp.seed);
+  std::vector<T> queries(rows.size() * dim_);
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    std::copy(user_queries + rows[i] * dim_, user_queries + rows[i] * dim_ + dim_, queries.begin() + i * dim_);
+  return tune_on(target_recall, k, queries, {}, half, tp);
+}
+
+// The search for the setting, on queries [0, half) of `queries`; [half, end) validate it. With
+// `self` (one index per query), each query's own point is left out of its answers.
+template <class T>
+ForestTuning PointForest<T>::tune_on(double target_recall, std::size_t k, const std::vector<T>& queries,
+                                     const std::vector<Index>& self, std::size_t half, const TuneParams& tp) const {
+  const Clock::time_point start = Clock::now();
+  const std::size_t n = size();
+  const std::size_t sample = queries.size() / dim_;
+  const std::size_t extra = self.empty() ? 0 : 1;  // the query's own point, asked for and dropped
   const std::size_t validation_first = half, validation_count = sample - half;
 
-  const NeighborLists<T> exact_wide = knn_exact_batch(queries.data(), sample, k + 1, tp.threads);
+  const NeighborLists<T> exact_wide = knn_exact_batch(queries.data(), sample, k + extra, tp.threads);
   auto exact_part = [&](std::size_t first, std::size_t count) {
     NeighborLists<T> part;
     part.offsets.resize(count + 1);
     for (std::size_t q = 0; q <= count; ++q) part.offsets[q] = q * k;
     part.neighbors.resize(count * k);
-    for (std::size_t q = 0; q < count; ++q) drop_self(exact_wide, first + q, self[first + q], part.neighbors.data() + q * k);
+    for (std::size_t q = 0; q < count; ++q) {
+      if (extra) drop_self(exact_wide, first + q, self[first + q], part.neighbors.data() + q * k);
+      else std::copy(exact_wide.row(first + q).begin(), exact_wide.row(first + q).end(), part.neighbors.data() + q * k);
+    }
     return part;
   };
   const NeighborLists<T> exact_tuning = exact_part(0, half);
@@ -129,9 +169,9 @@ ForestTuning PointForest<T>::tune(double target_recall, std::size_t k, const Tun
     ++best.settings_tried;
     const ForestSearchParams params{checks, trees};
     const Clock::time_point t0 = Clock::now();
-    const NeighborLists<T> wide = knn_batch(queries.data() + first * dim_, count, k + 1, params, 1);
+    const NeighborLists<T> wide = knn_batch(queries.data() + first * dim_, count, k + extra, params, 1);
     const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-    return Outcome{recall_at_k(without_self(wide, self, first, k), exact), seconds};
+    return Outcome{recall_at_k(extra ? without_self(wide, self, first, k) : wide, exact), seconds};
   };
 
   const std::size_t cap = tp.max_checks == 0 ? n : std::min(tp.max_checks, n);
@@ -202,5 +242,12 @@ template NeighborLists<double> PointForest<double>::knn_exact_batch(const double
                                                                     unsigned) const;
 template ForestTuning PointForest<float>::tune(double, std::size_t, const TuneParams&) const;
 template ForestTuning PointForest<double>::tune(double, std::size_t, const TuneParams&) const;
+template ForestTuning PointForest<float>::tune(double, std::size_t, const float*, std::size_t, const TuneParams&) const;
+template ForestTuning PointForest<double>::tune(double, std::size_t, const double*, std::size_t,
+                                                const TuneParams&) const;
+template ForestTuning PointForest<float>::tune_on(double, std::size_t, const std::vector<float>&,
+                                                  const std::vector<Index>&, std::size_t, const TuneParams&) const;
+template ForestTuning PointForest<double>::tune_on(double, std::size_t, const std::vector<double>&,
+                                                   const std::vector<Index>&, std::size_t, const TuneParams&) const;
 
 }  // namespace kdspace

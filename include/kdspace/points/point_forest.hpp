@@ -143,11 +143,19 @@ class PointForest {
   /// re-check, as PointTree's BatchMethod::scan): the reference answers for recall.
   NeighborLists<T> knn_exact_batch(const T* queries, std::size_t nq, std::size_t k, unsigned threads = 0) const;
 
-  /// The cheapest (trees, checks) whose mean recall@k reaches `target_recall` (in (0, 1]) on a
-  /// sample of the base points used as queries, each left out of its own answers; cheapest by
-  /// measured time. Exact answers come from the blocked scan. The setting is then checked on as many
-  /// other sample points (validation_recall); if it falls short there, the budget is doubled until
-  /// it does not (or reaches max_checks). Deterministic choice of sample for a given seed.
+  /// The cheapest (trees, checks) whose mean recall@k reaches `target_recall` (in (0, 1]) on sample
+  /// queries; cheapest by measured time. Exact answers come from the blocked scan. The setting is
+  /// then checked on as many other sample queries (validation_recall); if it falls short there, the
+  /// budget is doubled until it does not (or reaches max_checks). The sample is drawn with the seed.
+  ///
+  /// This form samples the queries from `queries` (nq rows; up to 2 * sample_queries of them):
+  /// queries like the ones to be answered give the truest setting.
+  ForestTuning tune(double target_recall, std::size_t k, const T* queries, std::size_t nq,
+                    const TuneParams& params = {}) const;
+  /// This form uses base points as queries, each left out of its own answers. Where base points have
+  /// near-copies of themselves that real queries lack (consecutive audio frames, video frames), it
+  /// finds neighbours easier than real queries would and the setting falls short on them: prefer the
+  /// form above when queries are at hand.
   ForestTuning tune(double target_recall, std::size_t k, const TuneParams& params = {}) const;
 
   /// Nodes of tree t, depth first (read-only; for tools and tests).
@@ -165,6 +173,8 @@ class PointForest {
   void search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch, QueryStats& stats,
               Neighbor<T>* out) const;
   void check_query(const T* q, const char* what, std::size_t row) const;
+  ForestTuning tune_on(double target_recall, std::size_t k, const std::vector<T>& queries,
+                       const std::vector<Index>& self, std::size_t half, const TuneParams& params) const;
 
   std::size_t dim_ = 0;
   std::size_t projected_dims_ = 0;
