@@ -136,6 +136,36 @@ class TreeBuilder {
   std::vector<double> axes_mean_;
 };
 
+/// internal_distance<L2>(a, b, dim), or, as soon as the distance is sure to exceed `limit`, some
+/// value above `limit`. The lanes and their combination are those of internal_distance(), so when
+/// it runs to the end the result is the same bit for bit; on the way, the lanes' partial sums
+/// combined in the same order can only grow (every term is >= 0 and rounding is monotone), so a
+/// partial combination above `limit` proves the full one is above it too.
+template <class T>
+T l2_distance_or_more(const T* a, const T* b, std::size_t dim, T limit) {
+  constexpr std::size_t lanes = 8, blocks_between_checks = 4;
+  const std::size_t blocks = dim / lanes;
+  if (blocks < 2 * blocks_between_checks) return internal_distance<L2>(a, b, dim);
+  T acc[lanes] = {};
+  for (std::size_t block = 0; block < blocks; ++block) {
+    const T* x = a + block * lanes;
+    const T* y = b + block * lanes;
+    for (std::size_t j = 0; j < lanes; ++j) acc[j] = L2::accumulate(acc[j], L2::term(x[j] - y[j]));
+    if ((block + 1) % blocks_between_checks == 0 && block + 1 < blocks) {
+      T partial[lanes];
+      for (std::size_t j = 0; j < lanes; ++j) partial[j] = acc[j];
+      for (std::size_t width = lanes / 2; width > 0; width /= 2)
+        for (std::size_t j = 0; j < width; ++j) partial[j] = L2::accumulate(partial[j], partial[j + width]);
+      if (partial[0] > limit) return partial[0];
+    }
+  }
+  for (std::size_t width = lanes / 2; width > 0; width /= 2)
+    for (std::size_t j = 0; j < width; ++j) acc[j] = L2::accumulate(acc[j], acc[j + width]);
+  T total = acc[0];
+  for (std::size_t i = blocks * lanes; i < dim; ++i) total = L2::accumulate(total, L2::term(a[i] - b[i]));
+  return total;
+}
+
 void check_params(const ForestParams& p, std::size_t dim) {
   if (p.trees == 0) throw Error("forest: trees must be at least 1");
   if (p.trees > 1024) throw Error("forest: at most 1024 trees, got " + std::to_string(p.trees));
@@ -374,6 +404,7 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
 
   detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), s.results);
   const std::size_t budget = search.checks;
+  const std::size_t row_bytes = d * sizeof(T);
   std::size_t checks = 0;
 
   // Descends from `id` (whose cell bound is `bound`, s.terms holding its per-axis shares) to a leaf,
@@ -385,12 +416,18 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
       ++stats.nodes_visited;
       if (node.is_leaf()) {
         const std::uint32_t* row = tree.order.data() + node.link;
+        // The rows of a leaf lie anywhere in memory (only the first tree's leaves are contiguous):
+        // ask for all of them before scoring the first, so their cache misses overlap.
+        for (std::uint32_t i = 0; i < node.count(); ++i) {
+          const char* first_byte = reinterpret_cast<const char*>(points_.data() + std::size_t{row[i]} * d);
+          for (std::size_t offset = 0; offset < row_bytes; offset += 64) __builtin_prefetch(first_byte + offset);
+        }
         for (std::uint32_t i = 0; i < node.count(); ++i) {
           const std::uint32_t r = row[i];
           if (s.stamp[r] == s.epoch) continue;
           s.stamp[r] = s.epoch;
           ++checks;
-          results.offer(internal_distance<L2>(q, points_.data() + std::size_t{r} * d, d), ids_[r]);
+          results.offer(l2_distance_or_more(q, points_.data() + std::size_t{r} * d, d, results.bound()), ids_[r]);
         }
         return;
       }
