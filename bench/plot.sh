@@ -157,7 +157,7 @@ script = ["set terminal pngcairo size 1500,900 enhanced font 'DejaVu Sans,11'",
           f"set output '{png}'",
           "set grid xtics ytics lc rgb '#dddddd'",
           "set key bottom left box opaque samplen 3 font ',9'",
-          "set logscale y 10", "set xrange [0.5:1.005]", "set xlabel 'recall@10'", "set ylabel 'queries / s (1 thread)'",
+          "set logscale y 10", "set xrange [0.5:1.005]", "set xlabel 'recall at k = 10'", "set ylabel 'queries / s (1 thread)'",
           f"set multiplot layout {(len(datasets) + 2) // 3},{min(3, len(datasets))} title "
           "'kdspace-forest-bench: approximate 10-NN, kdspace PointForest vs FLANN KDTreeIndex (checks 16..4096 along each line)' font ',13'"]
 for d in datasets:
