@@ -93,6 +93,7 @@
 #include <vector>
 
 #include "kdspace/rays/box_tree.hpp"
+#include "kdspace/rays/detail/slab.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 
 namespace {
@@ -282,39 +283,13 @@ void report_embree_error(void* /*user*/, RTCError code, const char* message) {
 /// way of passing per-ray data to callbacks).
 struct RayContext {
   RTCIntersectContext embree;
-  std::array<double, 3> origin;
-  std::array<double, 3> inverse;  ///< 1 / direction; 0 on axes where the direction is 0
-  std::array<bool, 3> parallel;   ///< direction component is +0 or -0
-  std::array<bool, 3> negative;   ///< direction component < 0
+  kdspace::detail::PreparedRay ray;  // the very preparation and slab test of kdspace's traversal
 
-  explicit RayContext(const Ray& ray) {
-    rtcInitIntersectContext(&embree);
-    for (int a = 0; a < 3; ++a) {
-      origin[a] = ray.origin[a];
-      parallel[a] = ray.direction[a] == 0;
-      negative[a] = ray.direction[a] < 0;
-      inverse[a] = parallel[a] ? 0.0 : 1.0 / static_cast<double>(ray.direction[a]);
-    }
-  }
+  explicit RayContext(const Ray& r) : ray(r) { rtcInitIntersectContext(&embree); }
 };
 static_assert(std::is_standard_layout<RayContext>::value, "RayContext must start with the Embree context");
 
-/// The closed slab test of kdspace's traversal (Kay & Kajiya): narrows [t_near, t_far] to the part
-/// inside the box; false when nothing is left.
-inline bool clip_to_box(const Box3f& b, const RayContext& r, double& t_near, double& t_far) {
-  for (int a = 0; a < 3; ++a) {
-    if (r.parallel[a]) {
-      if (r.origin[a] < b.lo[a] || r.origin[a] > b.hi[a]) return false;
-      continue;
-    }
-    const double t_lo = (static_cast<double>(b.lo[a]) - r.origin[a]) * r.inverse[a];
-    const double t_hi = (static_cast<double>(b.hi[a]) - r.origin[a]) * r.inverse[a];
-    const double t0 = r.negative[a] ? t_hi : t_lo, t1 = r.negative[a] ? t_lo : t_hi;
-    if (t0 > t_near) t_near = t0;
-    if (t1 < t_far) t_far = t1;
-  }
-  return t_near <= t_far;
-}
+using kdspace::detail::clip_to_box;
 
 void box_bounds(const RTCBoundsFunctionArguments* args) {
   const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
@@ -337,7 +312,7 @@ void box_intersect(const RTCIntersectFunctionNArguments* args) {
   }
   if (args->valid[0] == 0) return;
   const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
-  const RayContext& ray = *reinterpret_cast<const RayContext*>(args->context);
+  const kdspace::detail::PreparedRay& ray = reinterpret_cast<const RayContext*>(args->context)->ray;
   RTCRayN* rays = RTCRayHitN_RayN(args->rayhit, 1);
   RTCHitN* hits = RTCRayHitN_HitN(args->rayhit, 1);
   float& tfar = RTCRayN_tfar(rays, 1, 0);
@@ -554,7 +529,7 @@ bool t_close(float a, float b) {
 /// Length (in t) of the part of the ray inside the box: negative when the ray misses it, by about
 /// how far in t; -inf when the ray runs parallel to a slab outside it.
 double segment_in_box(const Box3f& box, const Ray& ray) {
-  const RayContext prepared(ray);
+  const kdspace::detail::PreparedRay prepared(ray);
   double t_near = 0, t_far = std::numeric_limits<double>::infinity();
   for (int a = 0; a < 3; ++a)
     if (prepared.parallel[a] && (prepared.origin[a] < box.lo[a] || prepared.origin[a] > box.hi[a]))

@@ -156,6 +156,7 @@ expect_error "dimension mismatch" 1 "query4.csv" "base.csv" "dimension 4" "dimen
   knn --base base.csv --query query4.csv -k 3 --out ids.ivecs
 expect_error "NaN in a csv base" 1 "nan.csv: row 3" "not finite" -- knn --base nan.csv --query query.csv -k 1 --out ids.ivecs
 expect_error "NaN in csv queries" 1 "nan.csv: row 3" -- knn --base base.csv --query nan.csv -k 1 --out ids.ivecs
+expect_error "NaN in csv queries with --recall" 1 "nan.csv: row 3" -- knn --base base.csv --query nan.csv -k 1 --out ids.ivecs --recall 0.9
 expect_error "truncated fvecs" 1 "trunc.fvecs: row 3" -- knn --base trunc.fvecs --query query.csv -k 1 --out ids.ivecs
 expect_error "empty csv" 1 "empty.csv" -- knn --base empty.csv --query query.csv -k 1 --out ids.ivecs
 expect_error "empty fvecs" 1 "empty.fvecs" -- knn --base base.csv --query empty.fvecs -k 1 --out ids.ivecs

@@ -11,10 +11,12 @@
 #include <filesystem>
 #include <numeric>
 #include <random>
+#include <sstream>
 #include <string>
 #include <system_error>
 #include <vector>
 
+#include "kdspace/points/brute_force.hpp"
 #include "kdspace/points/point_tree.hpp"
 #include "kdspace/rays/box_tree.hpp"
 
@@ -169,6 +171,28 @@ std::vector<T> make_queries(const std::vector<T>& pts, std::size_t n, std::size_
     }
   }
   return q;
+}
+
+/// The first difference between a batch answer and brute_force_knn over every query (ids and
+/// distances, rank by rank), described for a failure message; "" when they are the same.
+template <class Metric = kdspace::L2, class T>
+std::string differs_from_brute_force(const kdspace::NeighborLists<T>& batch, const std::vector<T>& pts,
+                                     std::size_t n, std::size_t dim, const std::vector<T>& queries, std::size_t k) {
+  const std::size_t nq = queries.size() / dim;
+  for (std::size_t q = 0; q < nq; ++q) {
+    const auto expected = kdspace::brute_force_knn<Metric>(pts.data(), n, dim, queries.data() + q * dim, k);
+    const auto row = batch.row(q);
+    if (row.size() != k) return "query " + std::to_string(q) + ": " + std::to_string(row.size()) + " results";
+    for (std::size_t i = 0; i < k; ++i)
+      if (!(row[i] == expected[i])) {
+        std::ostringstream out;
+        out.precision(10);
+        out << "query " << q << " rank " << i << ": got index " << row[i].index << " at " << row[i].distance
+            << ", brute force index " << expected[i].index << " at " << expected[i].distance;
+        return out.str();
+      }
+  }
+  return "";
 }
 
 // ---- scenes (test_rays.cpp, test_rays_build.cpp) ------------------------------------------------

@@ -28,24 +28,12 @@ namespace {
 
 /// The first query whose forest answer differs from brute_force_knn, or "".
 template <class T>
-std::string differs_from_brute_force(const PointForest<T>& forest, const std::vector<T>& pts, std::size_t n,
+std::string forest_differs(const PointForest<T>& forest, const std::vector<T>& pts, std::size_t n,
                                      std::size_t dim, const std::vector<T>& queries, std::size_t k,
                                      const ForestSearchParams& search, unsigned threads) {
   const std::size_t nq = queries.size() / dim;
   const auto batch = forest.knn_batch(queries.data(), nq, k, search, threads);
-  for (std::size_t q = 0; q < nq; ++q) {
-    const auto expected = kdspace::brute_force_knn(pts.data(), n, dim, queries.data() + q * dim, k);
-    const auto row = batch.row(q);
-    for (std::size_t i = 0; i < k; ++i)
-      if (!(row[i] == expected[i])) {
-        std::ostringstream out;
-        out.precision(10);
-        out << "query " << q << " rank " << i << ": got index " << row[i].index << " at " << row[i].distance
-            << ", brute force index " << expected[i].index << " at " << expected[i].distance;
-        return out.str();
-      }
-  }
-  return "";
+  return kdspace_test::differs_from_brute_force(batch, pts, n, dim, queries, k);
 }
 
 ForestSearchParams unlimited(std::size_t trees = 0) {
@@ -71,14 +59,14 @@ TEST_CASE("forest: with an unlimited budget the answers are exact, bit for bit, 
   for (std::size_t k : {1, 2, 5, 10, 100}) {
     if (k > n) continue;
     INFO(kdspace_test::name(shape) << " n=" << n << " dim=" << dim << " k=" << k << " pca=" << pca);
-    CHECK(differs_from_brute_force(forest, pts, n, dim, queries, k, unlimited(), 2) == "");
+    CHECK(forest_differs(forest, pts, n, dim, queries, k, unlimited(), 2) == "");
   }
   // One tree alone is exact too, and so is double precision.
-  CHECK(differs_from_brute_force(forest, pts, n, dim, queries, std::min<std::size_t>(n, 4), unlimited(1), 1) == "");
+  CHECK(forest_differs(forest, pts, n, dim, queries, std::min<std::size_t>(n, 4), unlimited(1), 1) == "");
   const auto pts_d = make_points<double>(shape, n, dim, seed);
   const auto queries_d = make_queries(pts_d, n, dim, 30, seed + 2);
   const PointForest<double> forest_d(pts_d.data(), n, dim, params);
-  CHECK(differs_from_brute_force(forest_d, pts_d, n, dim, queries_d, std::min<std::size_t>(n, 10), unlimited(), 1) == "");
+  CHECK(forest_differs(forest_d, pts_d, n, dim, queries_d, std::min<std::size_t>(n, 10), unlimited(), 1) == "");
 }
 
 TEST_CASE("forest: exact at awkward scales, where the pruning margin for the projection's rounding matters",
@@ -94,7 +82,7 @@ TEST_CASE("forest: exact at awkward scales, where the pruning margin for the pro
   const auto queries = make_queries(pts, n, dim, 50, 42);
   const PointForest<float> forest(pts.data(), n, dim);
   INFO("scale " << scale.factor << " offset " << scale.offset << " dim " << dim);
-  for (std::size_t k : {1, 10}) CHECK(differs_from_brute_force(forest, pts, n, dim, queries, k, unlimited(), 1) == "");
+  for (std::size_t k : {1, 10}) CHECK(forest_differs(forest, pts, n, dim, queries, k, unlimited(), 1) == "");
 }
 
 TEST_CASE("forest: every distance returned is exact, and the k-th never grows as the budget grows",

@@ -36,20 +36,7 @@ std::string scan_differs(const std::vector<T>& pts, std::size_t n, std::size_t d
   sp.batch_method = method;
   const std::size_t nq = queries.size() / dim;
   const auto batch = tree.knn_batch(queries.data(), nq, k, sp, threads);
-  for (std::size_t q = 0; q < nq; ++q) {
-    const auto expected = kdspace::brute_force_knn<Metric>(pts.data(), n, dim, queries.data() + q * dim, k);
-    const auto row = batch.row(q);
-    if (row.size() != k) return "query " + std::to_string(q) + ": " + std::to_string(row.size()) + " results";
-    for (std::size_t i = 0; i < k; ++i)
-      if (!(row[i] == expected[i])) {
-        std::ostringstream out;
-        out.precision(10);
-        out << "query " << q << " rank " << i << ": got index " << row[i].index << " at " << row[i].distance
-            << ", brute force index " << expected[i].index << " at " << expected[i].distance;
-        return out.str();
-      }
-  }
-  return "";
+  return kdspace_test::differs_from_brute_force<Metric>(batch, pts, n, dim, queries, k);
 }
 
 }  // namespace

@@ -199,14 +199,43 @@ bool starts_with(const std::string& s, const std::string& prefix) {
   return s.compare(0, prefix.size(), prefix) == 0;
 }
 
+// An index speaks of "row R" of its input; that input is the base file.
+Error in_base_file(const Error& e, const SearchJob& job) {
+  const std::string what = e.what();
+  return Error(starts_with(what, job.base + ":") ? what : job.base + ": " + what);
+}
+
+// "query row R: ..." from an index becomes "QUERYFILE: row R: ...".
+Error in_query_file(const Error& e, const SearchJob& job) {
+  const std::string what = e.what();
+  const std::string prefix = "query row ";
+  return Error(starts_with(what, prefix) ? job.query + ": row " + what.substr(prefix.size()) : what);
+}
+
+/// The base and query files, read and checked against each other (and k against the base).
+template <class T>
+struct Inputs {
+  io::Matrix<T> base, queries;
+};
+
+template <class T>
+Inputs<T> read_inputs(const SearchJob& job) {
+  Inputs<T> in{read_with_progress<T>(job.base), read_with_progress<T>(job.query)};
+  if (in.queries.cols != in.base.cols)
+    throw Error(job.query + ": dimension " + std::to_string(in.queries.cols) + " does not match the base (" +
+                job.base + ": dimension " + std::to_string(in.base.cols) + ")");
+  if (job.mode == Mode::knn && job.k > in.base.rows)
+    throw Error("k = " + std::to_string(job.k) + " exceeds the number of base points (" + job.base + " has " +
+                std::to_string(in.base.rows) + ")");
+  return in;
+}
+
 template <class T, class Metric>
 PointTree<T, Dynamic, Metric> build_tree(const io::Matrix<T>& base, const SearchJob& job) {
   try {
     return PointTree<T, Dynamic, Metric>(base.data.data(), base.rows, base.cols, job.build);
   } catch (const Error& e) {
-    // The tree speaks of "row R" of its input; that input is the base file.
-    const std::string what = e.what();
-    throw Error(starts_with(what, job.base + ":") ? what : job.base + ": " + what);
+    throw in_base_file(e, job);
   }
 }
 
@@ -222,10 +251,7 @@ NeighborLists<T> search(const PointTree<T, Dynamic, Metric>& tree, const io::Mat
     return tree.radius_batch(queries.data.data(), queries.rows, narrow<T>(job.radius), job.max_results,
                              job.threads, &stats);
   } catch (const Error& e) {
-    // "query row R: ..." from the tree becomes "QUERYFILE: row R: ...".
-    const std::string what = e.what();
-    const std::string prefix = "query row ";
-    throw Error(starts_with(what, prefix) ? job.query + ": row " + what.substr(prefix.size()) : what);
+    throw in_query_file(e, job);
   }
 }
 
@@ -246,14 +272,9 @@ void write_results(const NeighborLists<T>& found, const SearchJob& job) {
 
 template <class T, class Metric>
 int run_search(const SearchJob& job) {
-  io::Matrix<T> base = read_with_progress<T>(job.base);
-  const io::Matrix<T> queries = read_with_progress<T>(job.query);
-  if (queries.cols != base.cols)
-    throw Error(job.query + ": dimension " + std::to_string(queries.cols) + " does not match the base (" +
-                job.base + ": dimension " + std::to_string(base.cols) + ")");
-  if (job.mode == Mode::knn && job.k > base.rows)
-    throw Error("k = " + std::to_string(job.k) + " exceeds the number of base points (" + job.base + " has " +
-                std::to_string(base.rows) + ")");
+  Inputs<T> in = read_inputs<T>(job);
+  io::Matrix<T>& base = in.base;
+  const io::Matrix<T>& queries = in.queries;
 
   Progress build_progress("building the tree", Progress::Kind::elapsed);
   Clock::time_point start = Clock::now();
@@ -307,14 +328,9 @@ int run_search(const SearchJob& job) {
 // a sample of the queries.
 template <class T>
 int run_forest_search(const SearchJob& job) {
-  io::Matrix<T> base = read_with_progress<T>(job.base);
-  const io::Matrix<T> queries = read_with_progress<T>(job.query);
-  if (queries.cols != base.cols)
-    throw Error(job.query + ": dimension " + std::to_string(queries.cols) + " does not match the base (" +
-                job.base + ": dimension " + std::to_string(base.cols) + ")");
-  if (job.k > base.rows)
-    throw Error("k = " + std::to_string(job.k) + " exceeds the number of base points (" + job.base + " has " +
-                std::to_string(base.rows) + ")");
+  Inputs<T> in = read_inputs<T>(job);
+  io::Matrix<T>& base = in.base;
+  const io::Matrix<T>& queries = in.queries;
 
   ForestParams params;
   params.trees = job.forest_trees;
@@ -326,8 +342,7 @@ int run_forest_search(const SearchJob& job) {
   try {
     forest = std::make_unique<PointForest<T>>(base.data.data(), base.rows, base.cols, params);
   } catch (const Error& e) {
-    const std::string what = e.what();
-    throw Error(starts_with(what, job.base + ":") ? what : job.base + ": " + what);
+    throw in_base_file(e, job);
   }
   const double build_s = seconds_since(start);
   build_progress.finish();
@@ -340,7 +355,11 @@ int run_forest_search(const SearchJob& job) {
     Progress tune_progress("tuning the forest", Progress::Kind::elapsed);
     TuneParams tune_params;
     tune_params.threads = job.threads;
-    tuning = forest->tune(job.recall, job.k, queries.data.data(), queries.rows, tune_params);
+    try {
+      tuning = forest->tune(job.recall, job.k, queries.data.data(), queries.rows, tune_params);
+    } catch (const Error& e) {
+      throw in_query_file(e, job);
+    }
     tune_progress.finish();
     search_params = ForestSearchParams{tuning.checks, tuning.trees};
   }
@@ -352,9 +371,7 @@ int run_forest_search(const SearchJob& job) {
   try {
     found = forest->knn_batch(queries.data.data(), queries.rows, job.k, search_params, job.threads, &stats);
   } catch (const Error& e) {
-    const std::string what = e.what();
-    const std::string prefix = "query row ";
-    throw Error(starts_with(what, prefix) ? job.query + ": row " + what.substr(prefix.size()) : what);
+    throw in_query_file(e, job);
   }
   const double query_s = seconds_since(start);
   search_progress.finish();
