@@ -13,6 +13,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/metric.hpp"
+#include "kdspace/points/detail/input_checks.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
 
@@ -166,7 +167,7 @@ T l2_distance_or_more(const T* a, const T* b, std::size_t dim, T limit) {
   return total;
 }
 
-void check_params(const ForestParams& p, std::size_t dim) {
+void check_params(const ForestParams& p) {
   if (p.trees == 0) throw Error("forest: trees must be at least 1");
   if (p.trees > 1024) throw Error("forest: at most 1024 trees, got " + std::to_string(p.trees));
   if (p.leaf_size == 0) throw Error("forest: leaf_size must be at least 1");
@@ -175,7 +176,6 @@ void check_params(const ForestParams& p, std::size_t dim) {
   if (p.candidate_axes == 0) throw Error("forest: candidate_axes must be at least 1");
   if (p.variance_sample < 2) throw Error("forest: variance_sample must be at least 2");
   if (p.pca && p.pca_sample < 2) throw Error("forest: pca_sample must be at least 2");
-  (void)dim;
 }
 
 }  // namespace
@@ -183,16 +183,8 @@ void check_params(const ForestParams& p, std::size_t dim) {
 template <class T>
 PointForest<T>::PointForest(const T* rows, std::size_t n, std::size_t dim, const ForestParams& params)
     : dim_(dim), params_(params) {
-  if (dim == 0) throw Error("points have dimension 0");
-  if (n == 0) throw Error("no points: the data is empty");
-  if (n >= (std::size_t{1} << 30)) throw Error("too many points: " + std::to_string(n) + " (at most 2^30 - 1)");
-  if (rows == nullptr) throw Error("points: null pointer");
-  check_params(params, dim);
-  for (std::size_t i = 0; i < n; ++i)
-    for (std::size_t a = 0; a < dim; ++a)
-      if (!std::isfinite(rows[i * dim + a]))
-        throw Error("row " + std::to_string(i + 1) + ": coordinate " + std::to_string(a + 1) + " is not finite (" +
-                    std::to_string(rows[i * dim + a]) + ")");
+  check_params(params);
+  detail::check_points(rows, n, dim);
 
   // Mean, and the largest distance from it (for the pruning margin).
   mean_.assign(dim, 0.0);
@@ -300,8 +292,7 @@ std::size_t PointForest<T>::node_count() const {
 
 template <class T>
 std::size_t PointForest<T>::memory_bytes() const {
-  std::size_t bytes = points_.capacity() * sizeof(T) + index_bytes();
-  return bytes;
+  return points_.capacity() * sizeof(T) + index_bytes();
 }
 
 template <class T>
@@ -346,19 +337,9 @@ struct PointForest<T>::Scratch {
   }
 };
 
-template <class T>
-void PointForest<T>::check_query(const T* q, const char* what, std::size_t row) const {
-  if (q == nullptr) throw Error(std::string(what) + ": null pointer");
-  for (std::size_t a = 0; a < dim_; ++a)
-    if (!std::isfinite(q[a]))
-      throw Error(std::string(what) + (row ? " row " + std::to_string(row) : std::string()) + ": coordinate " +
-                  std::to_string(a + 1) + " is not finite (" + std::to_string(q[a]) + ")");
-}
-
 namespace {
 void check_search(const ForestSearchParams& s, std::size_t k, std::size_t n) {
-  if (k == 0) throw Error("k must be at least 1");
-  if (k > n) throw Error("k = " + std::to_string(k) + " exceeds the number of points (" + std::to_string(n) + ")");
+  detail::check_k(k, n);
   if (s.checks == 0) throw Error("checks must be at least 1");
 }
 }  // namespace
@@ -493,7 +474,7 @@ template <class T>
 std::vector<Neighbor<T>> PointForest<T>::knn(const T* q, std::size_t k, const ForestSearchParams& search_params,
                                              QueryStats* stats) const {
   check_search(search_params, k, size());
-  check_query(q, "query", 0);
+  detail::check_finite(q, dim_, "query");
   thread_local Scratch scratch;
   QueryStats local;
   std::vector<Neighbor<T>> out(k);
@@ -507,8 +488,7 @@ NeighborLists<T> PointForest<T>::knn_batch(const T* queries, std::size_t nq, std
                                            const ForestSearchParams& search_params, unsigned threads,
                                            QueryStats* stats) const {
   check_search(search_params, k, size());
-  if (nq > 0 && queries == nullptr) throw Error("queries: null pointer");
-  for (std::size_t q = 0; q < nq; ++q) check_query(queries + q * dim_, "query", q + 1);
+  detail::check_query_rows(queries, nq, dim_);
   NeighborLists<T> out;
   out.offsets.resize(nq + 1);
   for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;

@@ -17,6 +17,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/blocked_scan.hpp"
+#include "kdspace/points/detail/input_checks.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/point_forest.hpp"
 
@@ -25,31 +26,30 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-/// Row q of a (k + 1)-NN answer without the query point `self` (or without its last entry when
-/// `self` is not in it: more than k duplicates of the query with smaller indices).
+/// Rows [first, first + count) of `found`, k neighbours each. Without `self`, the rows are k long
+/// already. With it, they are k + 1 long and row first + q loses the query's own point
+/// self[self_first + q] (or its last entry when that point is not in it: more than k duplicates of
+/// the query with smaller indices).
 template <class T>
-void drop_self(const NeighborLists<T>& wide, std::size_t q, Index self, Neighbor<T>* out) {
-  const auto row = wide.row(q);
-  bool dropped = false;
-  for (std::size_t i = 0; i < row.size(); ++i) {
-    if (!dropped && row[i].index == self) {
-      dropped = true;
-      continue;
-    }
-    if (!dropped && i + 1 == row.size()) break;  // self not found: the last one goes
-    *out++ = row[i];
-  }
-}
-
-template <class T>
-NeighborLists<T> without_self(const NeighborLists<T>& wide, const std::vector<Index>& self, std::size_t first,
-                              std::size_t k) {
+NeighborLists<T> answers_of_sample(const NeighborLists<T>& found, std::size_t first, std::size_t count, std::size_t k,
+                                   const std::vector<Index>& self, std::size_t self_first) {
   NeighborLists<T> out;
-  const std::size_t nq = wide.rows();
-  out.offsets.resize(nq + 1);
-  for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
-  out.neighbors.resize(nq * k);
-  for (std::size_t q = 0; q < nq; ++q) drop_self(wide, q, self[first + q], out.neighbors.data() + q * k);
+  out.offsets.resize(count + 1);
+  for (std::size_t q = 0; q <= count; ++q) out.offsets[q] = q * k;
+  out.neighbors.resize(count * k);
+  for (std::size_t q = 0; q < count; ++q) {
+    const auto row = found.row(first + q);
+    Neighbor<T>* to = out.neighbors.data() + q * k;
+    bool dropped = self.empty();
+    for (std::size_t i = 0; i < row.size(); ++i) {
+      if (!dropped && row[i].index == self[self_first + q]) {
+        dropped = true;
+        continue;
+      }
+      if (!dropped && i + 1 == row.size()) break;  // self not found: the last one goes
+      *to++ = row[i];
+    }
+  }
   return out;
 }
 
@@ -58,10 +58,8 @@ NeighborLists<T> without_self(const NeighborLists<T>& wide, const std::vector<In
 template <class T>
 NeighborLists<T> PointForest<T>::knn_exact_batch(const T* queries, std::size_t nq, std::size_t k,
                                                  unsigned threads) const {
-  if (k == 0) throw Error("k must be at least 1");
-  if (k > size()) throw Error("k = " + std::to_string(k) + " exceeds the number of points (" + std::to_string(size()) + ")");
-  if (nq > 0 && queries == nullptr) throw Error("queries: null pointer");
-  for (std::size_t q = 0; q < nq; ++q) check_query(queries + q * dim_, "query", q + 1);
+  detail::check_k(k, size());
+  detail::check_query_rows(queries, nq, dim_);
   std::vector<T> centre(dim_);
   for (std::size_t a = 0; a < dim_; ++a) centre[a] = static_cast<T>(mean_[a]);
   const detail::ScanData<T> data{points_.data(), ids_.data(), size(), dim_, centre.data()};
@@ -119,8 +117,7 @@ ForestTuning PointForest<T>::tune(double target_recall, std::size_t k, const T* 
                                   const TuneParams& tp) const {
   check_tuning(target_recall, k, k, size(), tp);
   if (nq == 0) throw Error("tuning: no queries");
-  if (user_queries == nullptr) throw Error("tuning: queries: null pointer");
-  for (std::size_t q = 0; q < nq; ++q) check_query(user_queries + q * dim_, "query", q + 1);
+  detail::check_query_rows(user_queries, nq, dim_);
   const std::size_t half = std::max<std::size_t>(1, std::min(tp.sample_queries, nq / 2));
   const std::vector<std::uint32_t> rows = draw(nq, std::min(nq, 2 * half), tp.seed);
   std::vector<T> queries(rows.size() * dim_);
@@ -141,19 +138,9 @@ ForestTuning PointForest<T>::tune_on(double target_recall, std::size_t k, const 
   const std::size_t validation_first = half, validation_count = sample - half;
 
   const NeighborLists<T> exact_wide = knn_exact_batch(queries.data(), sample, k + extra, tp.threads);
-  auto exact_part = [&](std::size_t first, std::size_t count) {
-    NeighborLists<T> part;
-    part.offsets.resize(count + 1);
-    for (std::size_t q = 0; q <= count; ++q) part.offsets[q] = q * k;
-    part.neighbors.resize(count * k);
-    for (std::size_t q = 0; q < count; ++q) {
-      if (extra) drop_self(exact_wide, first + q, self[first + q], part.neighbors.data() + q * k);
-      else std::copy(exact_wide.row(first + q).begin(), exact_wide.row(first + q).end(), part.neighbors.data() + q * k);
-    }
-    return part;
-  };
-  const NeighborLists<T> exact_tuning = exact_part(0, half);
-  const NeighborLists<T> exact_validation = exact_part(validation_first, validation_count);
+  const NeighborLists<T> exact_tuning = answers_of_sample(exact_wide, 0, half, k, self, 0);
+  const NeighborLists<T> exact_validation =
+      answers_of_sample(exact_wide, validation_first, validation_count, k, self, validation_first);
 
   ForestTuning best;
   best.target_recall = target_recall;
@@ -171,7 +158,7 @@ ForestTuning PointForest<T>::tune_on(double target_recall, std::size_t k, const 
     const Clock::time_point t0 = Clock::now();
     const NeighborLists<T> wide = knn_batch(queries.data() + first * dim_, count, k + extra, params, 1);
     const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-    return Outcome{recall_at_k(extra ? without_self(wide, self, first, k) : wide, exact), seconds};
+    return Outcome{recall_at_k(answers_of_sample(wide, 0, count, k, self, first), exact), seconds};
   };
 
   const std::size_t cap = tp.max_checks == 0 ? n : std::min(tp.max_checks, n);

@@ -172,7 +172,6 @@ class PointForest {
 
   void search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch, QueryStats& stats,
               Neighbor<T>* out) const;
-  void check_query(const T* q, const char* what, std::size_t row) const;
   ForestTuning tune_on(double target_recall, std::size_t k, const std::vector<T>& queries,
                        const std::vector<Index>& self, std::size_t half, const TuneParams& params) const;
 

@@ -29,6 +29,7 @@
 #include "kdspace/metric.hpp"
 #include "kdspace/points/detail/blocked_scan.hpp"
 #include "kdspace/points/detail/builder.hpp"
+#include "kdspace/points/detail/input_checks.hpp"
 #include "kdspace/points/detail/node.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
@@ -215,27 +216,15 @@ class PointTree {
   // ---- validation ---------------------------------------------------------------------------------
 
   void validate_build(const T* rows, std::size_t n, std::size_t dim, const BuildParams& params) const {
-    if (dim == 0) throw Error("points have dimension 0");
-    if (Dim != Dynamic && dim != static_cast<std::size_t>(Dim))
+    if (Dim != Dynamic && dim != 0 && dim != static_cast<std::size_t>(Dim))
       throw Error("points have dimension " + std::to_string(dim) + ", this tree is built for dimension " +
                   std::to_string(Dim));
-    if (n == 0) throw Error("no points: the data is empty");
-    if (n >= (std::size_t{1} << 30)) throw Error("too many points: " + std::to_string(n) + " (at most 2^30 - 1)");
-    if (rows == nullptr) throw Error("points: null pointer");
     if (params.leaf_size == 0) throw Error("leaf_size must be at least 1");
     if (params.max_depth > 256) throw Error("max_depth must be at most 256, got " + std::to_string(params.max_depth));
-    for (std::size_t i = 0; i < n; ++i)
-      for (std::size_t a = 0; a < dim; ++a)
-        if (!std::isfinite(rows[i * dim + a]))
-          throw Error("row " + std::to_string(i + 1) + ": coordinate " + std::to_string(a + 1) + " is not finite (" +
-                      std::to_string(rows[i * dim + a]) + ")");
+    detail::check_points(rows, n, dim);
   }
 
-  void check_k(std::size_t k) const {
-    if (k == 0) throw Error("k must be at least 1");
-    if (k > size())
-      throw Error("k = " + std::to_string(k) + " exceeds the number of points (" + std::to_string(size()) + ")");
-  }
+  void check_k(std::size_t k) const { detail::check_k(k, size()); }
 
   static void check_radius(T r) {
     if (std::isnan(r) || r < 0) throw Error("radius must be a non-negative number, got " + std::to_string(r));
@@ -255,14 +244,7 @@ class PointTree {
     }
   }
 
-  void check_queries(const T* queries, std::size_t nq) const {
-    if (nq > 0 && queries == nullptr) throw Error("queries: null pointer");
-    for (std::size_t q = 0; q < nq; ++q)
-      for (std::size_t a = 0; a < dim(); ++a)
-        if (!std::isfinite(queries[q * dim() + a]))
-          throw Error("query row " + std::to_string(q + 1) + ": coordinate " + std::to_string(a + 1) +
-                      " is not finite (" + std::to_string(queries[q * dim() + a]) + ")");
-  }
+  void check_queries(const T* queries, std::size_t nq) const { detail::check_query_rows(queries, nq, dim()); }
 
   // ---- build ------------------------------------------------------------------------------------
 
