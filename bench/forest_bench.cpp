@@ -21,9 +21,14 @@
 //   mfcc                    audio descriptors computed here: 13 MFCCs with deltas and delta-deltas
 //                           (39-D) of 25 ms frames of synthetic audio (notes of harmonic tones with
 //                           vibrato and envelopes, over noise), see audio_features.hpp
+//   images                  image descriptors computed here: dense SIFT-like 128-D descriptors of 12
+//                           photographs (base) and of the other view of one of them (queries), see
+//                           image_features.hpp; needs the photos in --images DIR (run_all.sh
+//                           unpacks them), else this data set is skipped
 //   --fvecs BASE QUERIES    any file pair (fvecs, bvecs, npy, csv: read by kdspace::io)
 //
-// usage: kdspace-forest-bench [--dataset NAME]... [--fvecs BASE QUERIES]... [--quick] [--reps R]
+// usage: kdspace-forest-bench [--dataset NAME]... [--fvecs BASE QUERIES]... [--images DIR] [--quick]
+//                             [--reps R] [--leaf L] [--projected M] [--no-pca]
 // Output: per data set a markdown table of the curves and one of the targets, then JSON lines
 // ({"bench":"forest",...}). Progress on stderr.
 #include <flann/flann.hpp>
@@ -37,10 +42,12 @@
 #include <cstring>
 #include <memory>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "audio_features.hpp"
+#include "image_features.hpp"
 #include "kdspace/io/vectors.hpp"
 #include "kdspace/metric.hpp"
 #include "kdspace/points/point_forest.hpp"
@@ -51,7 +58,9 @@ using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 constexpr std::size_t k = 10;
-const std::size_t kChecks[] = {16, 32, 64, 128, 256, 512, 1024, 2048, 4096};
+// Budgets from 16 to 4096 in steps of about sqrt(2), the same for both libraries: a coarser grid
+// would let either library's best setting fall far above the target and blur the ratio.
+const std::size_t kChecks[] = {16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512, 768, 1024, 1536, 2048, 3072, 4096};
 const double kTargets[] = {0.8, 0.9, 0.95, 0.99};
 
 struct Data {
@@ -86,6 +95,35 @@ std::vector<float> make_clusters(std::size_t n, std::size_t dim, std::size_t lat
     }
   }
   return points;
+}
+
+/// The image descriptor data set from the photos in `folder`: every base descriptor when there are
+/// at most n, else n evenly spaced; queries and tuning queries from the even and odd descriptors of
+/// the query photo.
+Data photos(const std::string& folder, std::size_t n, std::size_t nq) {
+  using namespace kdspace_bench;
+  Data d;
+  d.name = "images";
+  d.dim = image_descriptor_dim;
+  std::vector<float> all;
+  for (const std::string& photo : base_photos()) {
+    const std::vector<float> one = photo_descriptors(folder + "/" + photo + ".png");
+    all.insert(all.end(), one.begin(), one.end());
+  }
+  const std::size_t available = all.size() / d.dim;
+  d.base = evenly_spaced_rows(all, d.dim, n);
+  d.n = d.base.size() / d.dim;
+  const std::vector<float> view = photo_descriptors(folder + "/" + std::string(query_photo()) + ".png");
+  std::vector<float> even, odd;
+  for (std::size_t r = 0; r < view.size() / d.dim; ++r)
+    (r % 2 ? odd : even).insert((r % 2 ? odd : even).end(), view.begin() + static_cast<long>(r * d.dim),
+                                view.begin() + static_cast<long>((r + 1) * d.dim));
+  d.queries = evenly_spaced_rows(even, d.dim, nq);
+  d.nq = d.queries.size() / d.dim;
+  d.tuning_queries = evenly_spaced_rows(odd, d.dim, 400);
+  d.description = "128-D dense SIFT-like descriptors of 12 photographs (" + std::to_string(d.n) + " of " +
+                  std::to_string(available) + "), queries from the other view of one of them; image_features.hpp";
+  return d;
 }
 
 Data synthetic(const std::string& name, std::size_t n, std::size_t nq, std::size_t dim, std::size_t latent) {
@@ -227,8 +265,11 @@ void run(const Data& d, std::size_t reps) {
   const double tuned_recall = kdspace::recall_at_k(tuned_found, exact);
 
   std::printf("\n### %s (%s; %zu points, %zu queries)\n\n", d.name.c_str(), d.description.c_str(), d.n, d.nq);
-  std::printf("Build: kdspace %.3f s (4 trees), %.3f s (8 trees); FLANN %.3f s (4 trees), %.3f s (8 trees).\n\n",
-              kdspace_build4, kdspace_build, flann4.build_s, flann8.build_s);
+  std::printf("Build: kdspace %.3f s (4 trees), %.3f s (8 trees), splitting %zu %s, points kept as %s; FLANN "
+              "%.3f s (4 trees), %.3f s (8 trees).\n\n",
+              kdspace_build4, kdspace_build, forest.projected_dims(),
+              forest.params().pca ? "principal directions" : "original axes", forest.compact() ? "bytes" : "floats",
+              flann4.build_s, flann8.build_s);
   std::printf("| library | trees | checks | recall@1 | recall@10 | q/s |\n|---|---:|---:|---:|---:|---:|\n");
   for (const Point& p : points)
     std::printf("| %s | %zu | %zu | %.3f | %.3f | %.0f |\n", p.library.c_str(), p.trees, p.checks, p.recall1, p.recall10,
@@ -279,6 +320,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> names;
   std::vector<std::pair<std::string, std::string>> files;
   bool quick = false;
+  std::string images;
   std::size_t reps = 3;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -288,15 +330,20 @@ int main(int argc, char** argv) {
     else if (a == "--leaf" && i + 1 < argc) g_params.leaf_size = static_cast<std::size_t>(std::atoi(argv[++i]));
     else if (a == "--projected" && i + 1 < argc) g_params.projected_dims = static_cast<std::size_t>(std::atoi(argv[++i]));
     else if (a == "--no-pca") g_params.pca = false;
+    else if (a == "--images" && i + 1 < argc) images = argv[++i];
     else if (a == "--fvecs" && i + 2 < argc) files.emplace_back(argv[i + 1], argv[i + 2]), i += 2;
     else {
-      std::fprintf(stderr, "usage: kdspace-forest-bench [--dataset structured32d|structured64d|structured128d|blobs128d|mfcc]..."
-                           " [--fvecs BASE QUERIES]... [--quick] [--reps R]\n");
+      std::fprintf(stderr, "usage: kdspace-forest-bench [--dataset structured32d|structured64d|structured128d|blobs128d|mfcc|images]..."
+                           " [--fvecs BASE QUERIES]... [--images DIR] [--quick] [--reps R] [--leaf L] [--projected M] [--no-pca]\n");
       return 2;
     }
   }
   if (quick) reps = 1;
-  if (names.empty() && files.empty()) names = {"structured32d", "mfcc", "structured64d", "structured128d", "blobs128d"};
+  if (names.empty() && files.empty()) {
+    names = {"structured32d", "mfcc", "structured64d", "structured128d", "blobs128d"};
+    if (!images.empty()) names.push_back("images");
+    else std::fprintf(stderr, "kdspace-forest-bench: no --images DIR: the image descriptor data set is skipped\n");
+  }
   const std::size_t n = quick ? 20000 : 100000, nq = quick ? 200 : 1000;
   std::printf("# kdspace-forest-bench: approximate 10-NN, kdspace PointForest vs FLANN KDTreeIndex, 1 thread, median of %zu\n",
               reps);
@@ -306,6 +353,10 @@ int main(int argc, char** argv) {
       else if (name == "structured64d") run(synthetic(name, n, nq, 64, 12), reps);
       else if (name == "structured128d") run(synthetic(name, n, nq, 128, 12), reps);
       else if (name == "blobs128d") run(synthetic(name, n, nq, 128, 0), reps);
+      else if (name == "images") {
+        if (images.empty()) throw std::runtime_error("the images data set needs --images DIR");
+        run(photos(images, n, nq), reps);
+      }
       else if (name == "mfcc") {
         Data d;
         d.name = "mfcc";

@@ -9,7 +9,9 @@
 #
 # usage: bench/run_all.sh [kdspace-bench options, e.g. --quick or --workload uniform3d]
 # environment: BUILD_DIR (default build/bench), RESULTS_DIR (default bench/results), PLOT_DIR
-#              (default docs), RAYS_BENCH_ARGS (options for kdspace-rays-bench)
+#              (default docs), RAYS_BENCH_ARGS (options for kdspace-rays-bench), FOREST_BENCH_ARGS
+#              (options for kdspace-forest-bench), IMAGES_DIR (the photographs for the forest
+#              bench; default BUILD_DIR/photos, filled from Debian's python3-skimage package)
 #
 # Build first: cmake --preset bench && cmake --build build/bench -j2
 # Each bench's stdout is kept whole in bench/results/*.log; its JSON lines go to *.jsonl, the rest
@@ -65,9 +67,27 @@ else
   fi
 fi
 
+# The photographs of the forest bench's image descriptor data set: Debian's python3-skimage ships
+# them; its package is downloaded and unpacked here (not installed, and no Python runs).
+images=${IMAGES_DIR:-$build/photos}
+if [ -x "$forest_bench" ] && [ ! -f "$images/motorcycle_right.png" ]; then
+  unpack=$(mktemp -d)
+  if (cd "$unpack" && apt-get download python3-skimage >/dev/null 2>&1) && dpkg -x "$unpack"/python3-skimage_*.deb "$unpack/x"; then
+    mkdir -p "$images"
+    find "$unpack/x" -path '*skimage/data/*.png' -exec cp {} "$images"/ \;
+  fi
+  rm -rf "$unpack"
+fi
+forest_args=()
+if [ -f "$images/motorcycle_right.png" ]; then
+  forest_args=(--images "$images")
+else
+  echo "run_all.sh: no photographs in $images (apt-get download python3-skimage failed); the forest bench skips its image data set" >&2
+fi
+
 if [ -x "$forest_bench" ]; then
   # shellcheck disable=SC2086  # FOREST_BENCH_ARGS is a list of options
-  run_bench forest "$forest_bench" ${FOREST_BENCH_ARGS:-}
+  run_bench forest "$forest_bench" "${forest_args[@]}" ${FOREST_BENCH_ARGS:-}
 fi
 
 python3 "$here/summary.py" "$results/points.jsonl" > "$results/summary.md" || status=1

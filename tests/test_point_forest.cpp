@@ -3,10 +3,12 @@
 // it never saw, and clear errors for bad parameters.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -233,6 +235,8 @@ TEST_CASE("forest: bad parameters and inputs get clear errors", "[points][forest
   CHECK_THROWS_WITH(build(with([](ForestParams& p) { p.leaf_size = 0; })), Catch::Contains("leaf_size"));
   CHECK_THROWS_WITH(build(with([](ForestParams& p) { p.projected_dims = 65; })), Catch::Contains("projected_dims"));
   CHECK_THROWS_WITH(build(with([](ForestParams& p) { p.candidate_axes = 0; })), Catch::Contains("candidate_axes"));
+  for (double share : {0.0, -0.1, 1.5, std::numeric_limits<double>::quiet_NaN()})
+    CHECK_THROWS_WITH(build(with([share](ForestParams& p) { p.variance_share = share; })), Catch::Contains("variance_share"));
   CHECK_THROWS_WITH(PointForest<float>(pts.data(), 0, 8), Catch::Contains("empty"));
   CHECK_THROWS_WITH(PointForest<float>(pts.data(), 100, 0), Catch::Contains("dimension 0"));
   auto bad = pts;
@@ -270,4 +274,91 @@ TEST_CASE("forest: tiny data: one point, two points, k = n", "[points][forest]")
   CHECK(both[1].distance == 5.f);
   const auto tuned = pair.tune(1.0, 1);
   CHECK(tuned.validation_recall == 1.0);
+}
+
+TEST_CASE("forest: the automatic projected dimension follows the spread of the variance",
+          "[points][forest]") {
+  const std::size_t n = 3000, dim = 100;
+  // Isotropic: 90% of the variance needs about 90 directions, so the cap of 64 applies.
+  const auto isotropic = make_points<float>(Shape::uniform, n, dim, 41);
+  CHECK(PointForest<float>(isotropic.data(), n, dim).projected_dims() == 64);
+  // Variance in 5 directions (plus a trace elsewhere): the floor of 24 applies.
+  std::vector<float> thin(n * dim);
+  const auto few = make_points<float>(Shape::uniform, n, 5, 42);
+  const auto trace = make_points<float>(Shape::uniform, n, dim, 43);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t a = 0; a < dim; ++a) thin[i * dim + a] = 1e-3f * trace[i * dim + a] + (a % 20 == 0 ? few[i * 5 + a / 20] : 0.f);
+  const PointForest<float> thin_forest(thin.data(), n, dim);
+  CHECK(thin_forest.projected_dims() == 24);
+  // Asked for: as given; fewer dimensions than the floor: all of them; no PCA: the dimension.
+  ForestParams asked;
+  asked.projected_dims = 10;
+  CHECK(PointForest<float>(isotropic.data(), n, dim, asked).projected_dims() == 10);
+  CHECK(PointForest<float>(few.data(), n, 5).projected_dims() == 5);
+  ForestParams no_pca;
+  no_pca.pca = false;
+  CHECK(PointForest<float>(isotropic.data(), n, dim, no_pca).projected_dims() == dim);
+  // Between the two: variance spread evenly over 40 directions keeps about 36 of them.
+  std::vector<float> forty(n * dim, 0.f);
+  const auto spread = make_points<float>(Shape::uniform, n, 40, 44);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t a = 0; a < 40; ++a) forty[i * dim + a * 2] = spread[i * 40 + a];
+  const std::size_t kept = PointForest<float>(forty.data(), n, dim).projected_dims();
+  CHECK(kept >= 33);
+  CHECK(kept <= 39);
+  // The answers stay exact with an unlimited budget whatever the dimension kept.
+  const auto queries = make_queries(forty, n, dim, 20, 45);
+  CHECK(forest_differs(PointForest<float>(forty.data(), n, dim), forty, n, dim, queries, 10, unlimited(), 1) == "");
+}
+
+TEST_CASE("forest: byte-valued points are kept as bytes, with the same answers bit for bit",
+          "[points][forest][exact]") {
+  const std::size_t n = 2500, dim = GENERATE(as<std::size_t>{}, 5, 64, 128);
+  std::mt19937 rng(static_cast<std::uint32_t>(dim));
+  std::uniform_int_distribution<int> level(0, 255), cluster(0, 9);
+  std::vector<float> centres(10 * dim);
+  for (float& c : centres) c = static_cast<float>(level(rng));
+  std::vector<float> pts(n * dim);
+  std::normal_distribution<float> noise(0.f, 12.f);
+  for (std::size_t i = 0; i < n; ++i) {
+    const int c = cluster(rng);
+    for (std::size_t a = 0; a < dim; ++a)
+      pts[i * dim + a] = std::clamp(std::round(centres[c * dim + a] + noise(rng)), 0.f, 255.f);
+  }
+  // Queries: some byte-valued, some not (the points' storage is what matters).
+  auto queries = make_queries(pts, n, dim, 40, 77);
+  for (std::size_t i = 0; i < 20 * dim; ++i) queries[i] = std::round(queries[i]);
+  ForestParams wide;
+  wide.compact = false;
+  const PointForest<float> bytes(pts.data(), n, dim), floats(pts.data(), n, dim, wide);
+  REQUIRE(bytes.compact());
+  REQUIRE_FALSE(floats.compact());
+  CHECK(bytes.memory_bytes() + 3 * n * dim == floats.memory_bytes());
+  const std::size_t nq = queries.size() / dim;
+  for (std::size_t k : {1, 10, 50}) {
+    INFO("dim " << dim << ", k " << k);
+    CHECK(forest_differs(bytes, pts, n, dim, queries, k, unlimited(), 2) == "");
+    for (std::size_t checks : {16, 200}) {
+      const auto a = bytes.knn_batch(queries.data(), nq, k, {checks, 0}, 1);
+      const auto b = floats.knn_batch(queries.data(), nq, k, {checks, 0}, 1);
+      bool same = a.neighbors.size() == b.neighbors.size();
+      for (std::size_t i = 0; same && i < a.neighbors.size(); ++i)
+        same = a.neighbors[i].index == b.neighbors[i].index && a.neighbors[i].distance == b.neighbors[i].distance;
+      CHECK(same);
+    }
+  }
+  // The exact answers for tuning come from the bytes as well.
+  const auto exact = bytes.knn_exact_batch(queries.data(), nq, 10, 1);
+  CHECK(kdspace_test::differs_from_brute_force(exact, pts, n, dim, queries, 10) == "");
+  // Doubles too; and one coordinate off the byte grid keeps the points as they are.
+  const std::vector<double> as_double(pts.begin(), pts.end());
+  const PointForest<double> double_bytes(as_double.data(), n, dim);
+  CHECK(double_bytes.compact());
+  auto off_grid = pts;
+  off_grid[dim + 1] = 0.5f;
+  CHECK_FALSE(PointForest<float>(off_grid.data(), n, dim).compact());
+  off_grid[dim + 1] = 256.f;
+  CHECK_FALSE(PointForest<float>(off_grid.data(), n, dim).compact());
+  off_grid[dim + 1] = -1.f;
+  CHECK_FALSE(PointForest<float>(off_grid.data(), n, dim).compact());
 }

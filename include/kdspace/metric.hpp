@@ -72,8 +72,11 @@ struct Linf {
 /// are combined pairwise in a fixed order: the lanes are independent, so the compiler keeps them in
 /// vector registers (the order of the additions, hence the result, is the same with or without
 /// vector instructions). The remaining axes, and all of them below 8, are added one by one.
-template <class Metric, class T>
-inline T internal_distance(const T* a, const T* b, std::size_t dim) {
+///
+/// `b` may hold another type than `a` (PointForest keeps byte-valued data as bytes): its values are
+/// converted to T exactly, so the result is the one for those values stored as T, bit for bit.
+template <class Metric, class T, class U>
+inline T internal_distance(const T* a, const U* b, std::size_t dim) {
   constexpr std::size_t lanes = 8;
   const std::size_t blocks = dim / lanes;
   T total = 0;
@@ -81,14 +84,14 @@ inline T internal_distance(const T* a, const T* b, std::size_t dim) {
     T acc[lanes] = {};
     for (std::size_t block = 0; block < blocks; ++block) {
       const T* x = a + block * lanes;
-      const T* y = b + block * lanes;
-      for (std::size_t j = 0; j < lanes; ++j) acc[j] = Metric::accumulate(acc[j], Metric::term(x[j] - y[j]));
+      const U* y = b + block * lanes;
+      for (std::size_t j = 0; j < lanes; ++j) acc[j] = Metric::accumulate(acc[j], Metric::term(x[j] - static_cast<T>(y[j])));
     }
     for (std::size_t width = lanes / 2; width > 0; width /= 2)
       for (std::size_t j = 0; j < width; ++j) acc[j] = Metric::accumulate(acc[j], acc[j + width]);
     total = acc[0];
   }
-  for (std::size_t i = blocks * lanes; i < dim; ++i) total = Metric::accumulate(total, Metric::term(a[i] - b[i]));
+  for (std::size_t i = blocks * lanes; i < dim; ++i) total = Metric::accumulate(total, Metric::term(a[i] - static_cast<T>(b[i])));
   return total;
 }
 

@@ -409,6 +409,8 @@ int run_forest_search(const SearchJob& job) {
         .add("scalar", sizeof(T) == sizeof(double) ? "double" : "float")
         .add("threads", detail::resolve_threads(job.threads))
         .add("trees_built", std::uint64_t{forest->tree_count()})
+        .add("projected_dims", std::uint64_t{forest->projected_dims()})
+        .add("stored_as", forest->compact() ? "bytes" : (sizeof(T) == sizeof(double) ? "double" : "float"))
         .add("trees", std::uint64_t{search_params.trees == 0 ? forest->tree_count() : search_params.trees})
         .add("checks", std::uint64_t{search_params.checks})
         .add("build_s", build_s);

@@ -142,16 +142,16 @@ class TreeBuilder {
 /// it runs to the end the result is the same bit for bit; on the way, the lanes' partial sums
 /// combined in the same order can only grow (every term is >= 0 and rounding is monotone), so a
 /// partial combination above `limit` proves the full one is above it too.
-template <class T>
-T l2_distance_or_more(const T* a, const T* b, std::size_t dim, T limit) {
+template <class T, class U>
+T l2_distance_or_more(const T* a, const U* b, std::size_t dim, T limit) {
   constexpr std::size_t lanes = 8, blocks_between_checks = 4;
   const std::size_t blocks = dim / lanes;
   if (blocks < 2 * blocks_between_checks) return internal_distance<L2>(a, b, dim);
   T acc[lanes] = {};
   for (std::size_t block = 0; block < blocks; ++block) {
     const T* x = a + block * lanes;
-    const T* y = b + block * lanes;
-    for (std::size_t j = 0; j < lanes; ++j) acc[j] = L2::accumulate(acc[j], L2::term(x[j] - y[j]));
+    const U* y = b + block * lanes;
+    for (std::size_t j = 0; j < lanes; ++j) acc[j] = L2::accumulate(acc[j], L2::term(x[j] - static_cast<T>(y[j])));
     if ((block + 1) % blocks_between_checks == 0 && block + 1 < blocks) {
       T partial[lanes];
       for (std::size_t j = 0; j < lanes; ++j) partial[j] = acc[j];
@@ -163,8 +163,16 @@ T l2_distance_or_more(const T* a, const T* b, std::size_t dim, T limit) {
   for (std::size_t width = lanes / 2; width > 0; width /= 2)
     for (std::size_t j = 0; j < width; ++j) acc[j] = L2::accumulate(acc[j], acc[j + width]);
   T total = acc[0];
-  for (std::size_t i = blocks * lanes; i < dim; ++i) total = L2::accumulate(total, L2::term(a[i] - b[i]));
+  for (std::size_t i = blocks * lanes; i < dim; ++i) total = L2::accumulate(total, L2::term(a[i] - static_cast<T>(b[i])));
   return total;
+}
+
+/// Whether every coordinate is an integer from 0 to 255 (so that a byte holds it exactly).
+template <class T>
+bool byte_valued(const T* rows, std::size_t count) {
+  for (std::size_t i = 0; i < count; ++i)
+    if (!(rows[i] >= 0 && rows[i] <= 255 && rows[i] == std::floor(rows[i]))) return false;
+  return true;
 }
 
 void check_params(const ForestParams& p) {
@@ -173,6 +181,8 @@ void check_params(const ForestParams& p) {
   if (p.leaf_size == 0) throw Error("forest: leaf_size must be at least 1");
   if (p.pca && p.projected_dims > 64)
     throw Error("forest: projected_dims must be at most 64, got " + std::to_string(p.projected_dims));
+  if (!(p.variance_share > 0 && p.variance_share <= 1))
+    throw Error("forest: variance_share must be in (0, 1], got " + std::to_string(p.variance_share));
   if (p.candidate_axes == 0) throw Error("forest: candidate_axes must be at least 1");
   if (p.variance_sample < 2) throw Error("forest: variance_sample must be at least 2");
   if (p.pca && p.pca_sample < 2) throw Error("forest: pca_sample must be at least 2");
@@ -201,9 +211,7 @@ PointForest<T>::PointForest(const T* rows, std::size_t n, std::size_t dim, const
   }
 
   // Principal directions, from the covariance of an evenly spaced sample.
-  const std::size_t m = params.pca ? (params.projected_dims ? std::min(params.projected_dims, dim) : std::min<std::size_t>(dim, 24))
-                                   : dim;
-  projected_dims_ = m;
+  std::size_t m = dim;
   if (params.pca) {
     const std::size_t sample = std::min(n, params.pca_sample);
     RowMatrixd centred(static_cast<long>(sample), static_cast<long>(dim));
@@ -215,11 +223,24 @@ PointForest<T>::PointForest(const T* rows, std::size_t n, std::size_t dim, const
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> solver(covariance);
     if (solver.info() != Eigen::Success) throw Error("forest: the principal directions could not be computed");
     // Eigenvalues ascend: the leading directions are the last columns.
+    if (params.projected_dims) {
+      m = std::min(params.projected_dims, dim);
+    } else {
+      const Eigen::VectorXd& values = solver.eigenvalues();
+      const double total = std::max(0.0, values.sum());
+      const std::size_t least = std::min<std::size_t>(dim, 24), most = std::min<std::size_t>(dim, 64);
+      double kept = 0;
+      m = 0;
+      while (m < most && (m < least || kept < params.variance_share * total))
+        kept += std::max(0.0, values(static_cast<long>(dim - 1 - m++)));
+    }
     projection_.resize(dim * m);
     for (std::size_t a = 0; a < dim; ++a)
       for (std::size_t j = 0; j < m; ++j)
         projection_[a * m + j] = solver.eigenvectors()(static_cast<long>(a), static_cast<long>(dim - 1 - j));
   }
+
+  projected_dims_ = m;
 
   // Projected coordinates, as floats, in blocks of rows.
   std::vector<float> proj(n * m);
@@ -263,8 +284,14 @@ PointForest<T>::PointForest(const T* rows, std::size_t n, std::size_t dim, const
   ids_ = trees_[0].order;
   std::vector<std::uint32_t> row_of(n);
   for (std::size_t r = 0; r < n; ++r) row_of[ids_[r]] = static_cast<std::uint32_t>(r);
-  points_.resize(n * dim);
-  for (std::size_t r = 0; r < n; ++r) std::copy(rows + ids_[r] * dim, rows + ids_[r] * dim + dim, points_.begin() + r * dim);
+  if (params.compact && byte_valued(rows, n * dim)) {
+    bytes_.resize(n * dim);
+    for (std::size_t r = 0; r < n; ++r)
+      for (std::size_t a = 0; a < dim; ++a) bytes_[r * dim + a] = static_cast<std::uint8_t>(rows[ids_[r] * dim + a]);
+  } else {
+    points_.resize(n * dim);
+    for (std::size_t r = 0; r < n; ++r) std::copy(rows + ids_[r] * dim, rows + ids_[r] * dim + dim, points_.begin() + r * dim);
+  }
   for (Tree& tree : trees_)
     for (std::uint32_t& row : tree.order) row = row_of[row];
 }
@@ -292,7 +319,7 @@ std::size_t PointForest<T>::node_count() const {
 
 template <class T>
 std::size_t PointForest<T>::memory_bytes() const {
-  return points_.capacity() * sizeof(T) + index_bytes();
+  return points_.capacity() * sizeof(T) + bytes_.capacity() + index_bytes();
 }
 
 template <class T>
@@ -385,7 +412,19 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
 
   detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), s.results);
   const std::size_t budget = search.checks;
-  const std::size_t row_bytes = d * sizeof(T);
+  const bool compact = !bytes_.empty();
+  const std::size_t row_bytes = d * (compact ? 1 : sizeof(T));
+  auto row_start = [&](std::uint32_t r) {
+    return compact ? reinterpret_cast<const char*>(bytes_.data() + std::size_t{r} * d)
+                   : reinterpret_cast<const char*>(points_.data() + std::size_t{r} * d);
+  };
+  auto score = [&](std::uint32_t r) {
+    const T limit = results.bound();
+    const T dist = compact ? l2_distance_or_more(q, bytes_.data() + std::size_t{r} * d, d, limit)
+                           : l2_distance_or_more(q, points_.data() + std::size_t{r} * d, d, limit);
+    // Most points do not enter: their original index (a cache miss) is read only for those that may.
+    if (dist <= results.bound()) results.offer(dist, ids_[r]);
+  };
   std::size_t checks = 0;
 
   // Descends from `id` (whose cell bound is `bound`, s.terms holding its per-axis shares) to a leaf,
@@ -400,7 +439,7 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
         // The rows of a leaf lie anywhere in memory (only the first tree's leaves are contiguous):
         // ask for all of them before scoring the first, so their cache misses overlap.
         for (std::uint32_t i = 0; i < node.count(); ++i) {
-          const char* first_byte = reinterpret_cast<const char*>(points_.data() + std::size_t{row[i]} * d);
+          const char* first_byte = row_start(row[i]);
           for (std::size_t offset = 0; offset < row_bytes; offset += 64) __builtin_prefetch(first_byte + offset);
         }
         for (std::uint32_t i = 0; i < node.count(); ++i) {
@@ -408,7 +447,7 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
           if (s.stamp[r] == s.epoch) continue;
           s.stamp[r] = s.epoch;
           ++checks;
-          results.offer(l2_distance_or_more(q, points_.data() + std::size_t{r} * d, d, results.bound()), ids_[r]);
+          score(r);
         }
         return;
       }

@@ -62,7 +62,10 @@ NeighborLists<T> PointForest<T>::knn_exact_batch(const T* queries, std::size_t n
   detail::check_query_rows(queries, nq, dim_);
   std::vector<T> centre(dim_);
   for (std::size_t a = 0; a < dim_; ++a) centre[a] = static_cast<T>(mean_[a]);
-  const detail::ScanData<T> data{points_.data(), ids_.data(), size(), dim_, centre.data()};
+  // The scan multiplies matrices of T: byte-valued points are widened for it (exactly) first.
+  std::vector<T> widened(bytes_.begin(), bytes_.end());
+  const T* rows = bytes_.empty() ? points_.data() : widened.data();
+  const detail::ScanData<T> data{rows, ids_.data(), size(), dim_, centre.data()};
   NeighborLists<T> out;
   out.offsets.resize(nq + 1);
   for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
@@ -106,7 +109,8 @@ ForestTuning PointForest<T>::tune(double target_recall, std::size_t k, const Tun
   std::vector<T> queries(rows.size() * dim_);
   std::vector<Index> self(rows.size());
   for (std::size_t i = 0; i < rows.size(); ++i) {
-    std::copy(points_.begin() + rows[i] * dim_, points_.begin() + rows[i] * dim_ + dim_, queries.begin() + i * dim_);
+    for (std::size_t a = 0; a < dim_; ++a)
+      queries[i * dim_ + a] = bytes_.empty() ? points_[rows[i] * dim_ + a] : static_cast<T>(bytes_[rows[i] * dim_ + a]);
     self[i] = ids_[rows[i]];
   }
   return tune_on(target_recall, k, queries, self, half, tp);

@@ -4,7 +4,8 @@
 // How it works.
 //  - Build: the data's mean and principal directions are computed (covariance of a sample, Eigen's
 //    self-adjoint eigensolver), and every point is projected onto the `projected_dims` leading
-//    directions. Each tree splits those projected coordinates: at each node the axis is drawn at
+//    directions (by default as many as hold 90% of the variance, from 24 to 64: data whose variance
+//    is spread over many directions, where the cells must follow local structure, keep more). Each tree splits those projected coordinates: at each node the axis is drawn at
 //    random among the `candidate_axes` of largest variance (measured on a sample of the node's
 //    points), the position is the median. Trees differ only in their random draws, made by a
 //    generator seeded with (seed, tree number): the forest is the same for any thread count.
@@ -19,7 +20,7 @@
 //    test allows for the rounding of the projection (a margin from the data's extent), so it never
 //    drops a cell that could hold a neighbour.
 //
-// Memory: a copy of the points (n * dim * sizeof(T)), the original index of each (4 bytes a point),
+// Memory: a copy of the points (n * dim * sizeof(T), or n * dim bytes for byte-valued data), the original index of each (4 bytes a point),
 // and per tree the leaf order of the points (4 bytes a point) and its nodes (16 bytes each, about
 // 2n / leaf_size of them); plus the projection (dim * projected_dims doubles). memory_bytes() gives
 // the exact figure. The projected coordinates are only needed while building.
@@ -43,8 +44,16 @@ struct ForestParams {
   /// Rotate the data onto its principal directions before splitting (true), or split the original
   /// axes (false; then projected_dims is the dimension itself).
   bool pca = true;
-  /// Leading principal directions the trees split on (1..64); 0 = min(dim, 24).
+  /// Leading principal directions the trees split on (1..64); 0 = automatic: the fewest that hold
+  /// `variance_share` of the data's variance, but at least min(dim, 24) and at most min(dim, 64).
   std::size_t projected_dims = 0;
+  /// Share of the variance the automatic projected_dims keeps (in (0, 1]).
+  double variance_share = 0.9;
+  /// Keep the points as bytes when every coordinate is an integer from 0 to 255 (SIFT-like
+  /// descriptors, bvecs files): a quarter of the memory for float (an eighth for double) and of the
+  /// bytes read per scored point. The answers are the same bit for bit (bytes convert exactly, and
+  /// the distance adds the same values in the same order).
+  bool compact = true;
   /// At each node the split axis is drawn among this many axes of largest variance (>= 1).
   std::size_t candidate_axes = 5;
   /// Points of a node whose variance chooses its axis (at most; >= 2).
@@ -121,6 +130,8 @@ class PointForest {
   std::size_t dim() const { return dim_; }
   std::size_t tree_count() const { return trees_.size(); }
   std::size_t projected_dims() const { return projected_dims_; }
+  /// Whether the points are kept as bytes (ForestParams::compact and byte-valued data).
+  bool compact() const { return !bytes_.empty(); }
   /// Deepest leaf over all trees.
   std::size_t depth() const;
   std::size_t leaf_count() const;
@@ -179,6 +190,7 @@ class PointForest {
   std::size_t projected_dims_ = 0;
   ForestParams params_;
   std::vector<T> points_;             // copy of the points, rows in the first tree's leaf order
+  std::vector<std::uint8_t> bytes_;   // or, when compact, the same as bytes (points_ then empty)
   std::vector<std::uint32_t> ids_;    // original index of each row of points_
   std::vector<double> mean_;          // dim
   std::vector<double> projection_;    // dim x projected_dims, row-major: column j = direction j
