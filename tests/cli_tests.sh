@@ -268,7 +268,8 @@ if expect_ok "knn --stats" knn --base base.csv --query query.csv -k 3 --out ids.
   check_stats "knn --stats is JSON with the required keys" "$common_keys k"
 fi
 if expect_ok "knn --forest --stats" knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 4 --checks 8 --stats; then
-  check_stats "knn --forest --stats is JSON with the required keys" "$common_keys k trees checks recall recall_queries"
+  check_stats "knn --forest --stats is JSON with the required keys" \
+    "$common_keys k trees trees_built projected_dims stored_as checks recall recall_queries"
 fi
 if expect_ok "knn --recall --stats" knn --base base.csv --query query.csv -k 3 --out ids.ivecs --recall 0.9 --stats; then
   check_stats "knn --recall --stats is JSON with the tuning keys" \
