@@ -115,9 +115,10 @@ Data photos(const std::string& folder, std::size_t n, std::size_t nq) {
   d.n = d.base.size() / d.dim;
   const std::vector<float> view = photo_descriptors(folder + "/" + std::string(query_photo()) + ".png");
   std::vector<float> even, odd;
-  for (std::size_t r = 0; r < view.size() / d.dim; ++r)
-    (r % 2 ? odd : even).insert((r % 2 ? odd : even).end(), view.begin() + static_cast<long>(r * d.dim),
-                                view.begin() + static_cast<long>((r + 1) * d.dim));
+  for (std::size_t r = 0; r < view.size() / d.dim; ++r) {
+    std::vector<float>& half = r % 2 ? odd : even;
+    half.insert(half.end(), view.begin() + static_cast<long>(r * d.dim), view.begin() + static_cast<long>((r + 1) * d.dim));
+  }
   d.queries = evenly_spaced_rows(even, d.dim, nq);
   d.nq = d.queries.size() / d.dim;
   d.tuning_queries = evenly_spaced_rows(odd, d.dim, 400);

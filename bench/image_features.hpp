@@ -113,7 +113,23 @@ inline void describe_octave(const GrayImage& img, int stride, float min_gradient
       if (angle < 0) angle += two_pi;
       orientation[i] = angle;
     }
+  // What depends only on a pixel's place in the window: its Gaussian weight, and its position in
+  // cell units (cell centres at 0..3) as the cell below and the fraction beyond it.
+  struct Place {
+    float weight, fx, fy;
+    int x0, y0;
+  };
+  std::vector<Place> places(window * window);
   const float half = static_cast<float>(window) / 2.f, cell_size = static_cast<float>(window) / cells;
+  for (int v = 0; v < window; ++v)
+    for (int u = 0; u < window; ++u) {
+      const float fu = static_cast<float>(u) + 0.5f, fv = static_cast<float>(v) + 0.5f;
+      const float du = fu - half, dv = fv - half;
+      const float px = fu / cell_size - 0.5f, py = fv / cell_size - 0.5f;
+      const int x0 = static_cast<int>(std::floor(px)), y0 = static_cast<int>(std::floor(py));
+      places[static_cast<std::size_t>(v * window + u)] = {std::exp(-(du * du + dv * dv) / (2 * half * half)),
+                                                          px - static_cast<float>(x0), py - static_cast<float>(y0), x0, y0};
+    }
   float histogram[cells * cells * bins];
   for (int cy = window / 2 + 1; cy + window / 2 + 1 < h; cy += stride)
     for (int cx = window / 2 + 1; cx + window / 2 + 1 < w; cx += stride) {
@@ -123,16 +139,14 @@ inline void describe_octave(const GrayImage& img, int stride, float min_gradient
         for (int u = 0; u < window; ++u) {
           const int x = cx - window / 2 + u, y = cy - window / 2 + v;
           const std::size_t i = static_cast<std::size_t>(y) * w + x;
-          const float fu = static_cast<float>(u) + 0.5f, fv = static_cast<float>(v) + 0.5f;
-          const float du = fu - half, dv = fv - half;
-          const float m = magnitude[i] * std::exp(-(du * du + dv * dv) / (2 * half * half));
+          const Place& place = places[static_cast<std::size_t>(v * window + u)];
+          const float m = magnitude[i] * place.weight;
           gradient_sum += magnitude[i];
-          // Position in cell units (cell centres at 0..3) and in orientation bins.
-          const float px = fu / cell_size - 0.5f, py = fv / cell_size - 0.5f;
+          const int x0 = place.x0, y0 = place.y0;
+          const float fx = place.fx, fy = place.fy;
           const float po = orientation[i] / two_pi * static_cast<float>(bins);
-          const int x0 = static_cast<int>(std::floor(px)), y0 = static_cast<int>(std::floor(py));
           const int o0 = static_cast<int>(std::floor(po));
-          const float fx = px - static_cast<float>(x0), fy = py - static_cast<float>(y0), fo = po - static_cast<float>(o0);
+          const float fo = po - static_cast<float>(o0);
           for (int j = 0; j < 2; ++j) {
             const int yy = y0 + j;
             if (yy < 0 || yy >= cells) continue;
@@ -175,15 +189,14 @@ inline std::vector<float> photo_descriptors(const std::string& path, int stride 
   return out;
 }
 
-/// At most `count` rows of `rows` (dim each), evenly spaced, starting at row `offset` of each step.
-inline std::vector<float> evenly_spaced_rows(const std::vector<float>& rows, std::size_t dim, std::size_t count,
-                                             std::size_t offset = 0) {
+/// At most `count` rows of `rows` (dim each), evenly spaced.
+inline std::vector<float> evenly_spaced_rows(const std::vector<float>& rows, std::size_t dim, std::size_t count) {
   const std::size_t total = rows.size() / dim;
   if (count >= total) return rows;
   std::vector<float> out;
   out.reserve(count * dim);
   for (std::size_t i = 0; i < count; ++i) {
-    const std::size_t row = std::min(total - 1, i * total / count + offset);
+    const std::size_t row = i * total / count;
     out.insert(out.end(), rows.begin() + static_cast<long>(row * dim), rows.begin() + static_cast<long>((row + 1) * dim));
   }
   return out;

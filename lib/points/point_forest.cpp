@@ -10,6 +10,7 @@
 #include <numeric>
 #include <random>
 #include <string>
+#include <type_traits>
 
 #include "kdspace/error.hpp"
 #include "kdspace/metric.hpp"
@@ -284,14 +285,14 @@ PointForest<T>::PointForest(const T* rows, std::size_t n, std::size_t dim, const
   ids_ = trees_[0].order;
   std::vector<std::uint32_t> row_of(n);
   for (std::size_t r = 0; r < n; ++r) row_of[ids_[r]] = static_cast<std::uint32_t>(r);
-  if (params.compact && byte_valued(rows, n * dim)) {
-    bytes_.resize(n * dim);
+  auto gather = [&](auto& copy) {  // as bytes or as T
+    copy.resize(n * dim);
     for (std::size_t r = 0; r < n; ++r)
-      for (std::size_t a = 0; a < dim; ++a) bytes_[r * dim + a] = static_cast<std::uint8_t>(rows[ids_[r] * dim + a]);
-  } else {
-    points_.resize(n * dim);
-    for (std::size_t r = 0; r < n; ++r) std::copy(rows + ids_[r] * dim, rows + ids_[r] * dim + dim, points_.begin() + r * dim);
-  }
+      std::transform(rows + ids_[r] * dim, rows + ids_[r] * dim + dim, copy.begin() + static_cast<long>(r * dim),
+                     [](T v) { return static_cast<typename std::decay_t<decltype(copy)>::value_type>(v); });
+  };
+  if (params.compact && byte_valued(rows, n * dim)) gather(bytes_);
+  else gather(points_);
   for (Tree& tree : trees_)
     for (std::uint32_t& row : tree.order) row = row_of[row];
 }
@@ -423,7 +424,7 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
     const T dist = compact ? l2_distance_or_more(q, bytes_.data() + std::size_t{r} * d, d, limit)
                            : l2_distance_or_more(q, points_.data() + std::size_t{r} * d, d, limit);
     // Most points do not enter: their original index (a cache miss) is read only for those that may.
-    if (dist <= results.bound()) results.offer(dist, ids_[r]);
+    if (dist <= limit) results.offer(dist, ids_[r]);
   };
   std::size_t checks = 0;
 
