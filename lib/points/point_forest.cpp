@@ -334,24 +334,41 @@ std::size_t PointForest<T>::index_bytes() const {
 
 /// Per-thread working memory of a query: reused from query to query, so a query allocates nothing
 /// once it has grown. `stamp[row] == epoch` marks a row already scored by the current query.
+///
+/// A cell's bound is the sum over projected axes of one term each (the squared gap from the query
+/// to the cell along that axis, 0 where the query lies within). Going to a far child replaces one
+/// axis's term, so a queued branch keeps its cell's terms as a trail: the one term it changed and
+/// the trail of the cell it was queued from. Entering a branch rebuilds the terms from the trail
+/// (the newest term of an axis wins) without walking the tree from its root again.
 template <class T>
 struct PointForest<T>::Scratch {
+  static constexpr std::uint32_t no_trail = 0xffffffffu;
   struct Branch {
     double bound;  // squared distance from the projected query to the branch's cell
     std::uint32_t tree;
     std::uint32_t node;
+    std::uint32_t trail;  // the cell's last changed term, in `trail`
+  };
+  struct Term {
+    double value;
+    std::uint32_t axis;
+    std::uint32_t parent;  // the rest of the cell's terms (no_trail: all others 0)
   };
   // Min-heap on (bound, tree, node): the order does not depend on anything but the query.
-  static bool after(const Branch& a, const Branch& b) {
-    if (a.bound != b.bound) return a.bound > b.bound;
-    if (a.tree != b.tree) return a.tree > b.tree;
-    return a.node > b.node;
-  }
+  struct After {
+    bool operator()(const Branch& a, const Branch& b) const {
+      if (a.bound != b.bound) return a.bound > b.bound;
+      if (a.tree != b.tree) return a.tree > b.tree;
+      return a.node > b.node;
+    }
+  };
 
   std::vector<double> query;     // projected query
-  std::vector<double> terms;     // per projected axis, its share of the current cell's bound
+  std::vector<double> terms;     // per projected axis, its term in the current cell's bound
+  std::vector<std::uint8_t> set;  // per projected axis: its term was set by enter()
   std::vector<std::uint32_t> touched;
   std::vector<Branch> heap;
+  std::vector<Term> trail;
   std::vector<std::uint32_t> stamp;
   std::uint32_t epoch = 0;
   std::vector<detail::Candidate<T>> results;
@@ -361,7 +378,24 @@ struct PointForest<T>::Scratch {
     if (++epoch == 0) std::fill(stamp.begin(), stamp.end(), 0u), epoch = 1;
     query.resize(m);
     terms.assign(m, 0.0);
+    set.assign(m, 0);
     heap.clear();
+    trail.clear();
+  }
+
+  // Sets `terms` to those of the cell whose trail starts at `t`; `touched` lists the axes set.
+  void enter(std::uint32_t t) {
+    for (; t != no_trail; t = trail[t].parent) {
+      const Term& term = trail[t];
+      if (set[term.axis]) continue;  // a newer term of this axis holds
+      set[term.axis] = 1;
+      terms[term.axis] = term.value;
+      touched.push_back(term.axis);
+    }
+  }
+  void leave() {
+    for (std::uint32_t axis : touched) terms[axis] = 0, set[axis] = 0;
+    touched.clear();
   }
 };
 
@@ -376,6 +410,8 @@ template <class T>
 void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& s,
                             QueryStats& stats, Neighbor<T>* out) const {
   using Branch = typename Scratch::Branch;
+  using Term = typename Scratch::Term;
+  using After = typename Scratch::After;
   const std::size_t n = size(), d = dim_, m = projected_dims_;
   s.start(n, m);
 
@@ -428,9 +464,9 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
   };
   std::size_t checks = 0;
 
-  // Descends from `id` (whose cell bound is `bound`, s.terms holding its per-axis shares) to a leaf,
-  // queueing the far child at every step, then scores the leaf.
-  auto descend = [&](std::uint32_t tree_id, std::uint32_t id, double bound) {
+  // Descends from `id` (whose cell bound is `bound`, s.terms holding its terms, `trail` their trail)
+  // to a leaf, queueing the far child at every step, then scores the leaf.
+  auto descend = [&](std::uint32_t tree_id, std::uint32_t id, double bound, std::uint32_t trail) {
     const Tree& tree = trees_[tree_id];
     for (;;) {
       const Node& node = tree.nodes[id];
@@ -458,52 +494,29 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
       const double to_right = node.right_min - x;
       const bool left_first = to_left <= to_right;
       const double far_gap = left_first ? to_right : to_left;
-      const double far_bound = bound - s.terms[axis] + far_gap * far_gap;
+      const double far_term = far_gap * far_gap;
+      const double far_bound = bound - s.terms[axis] + far_term;
       if (!prunable(far_bound, results.bound())) {
-        s.heap.push_back(Branch{far_bound, tree_id, left_first ? node.link : id + 1});
-        std::push_heap(s.heap.begin(), s.heap.end(), Scratch::after);
+        s.heap.push_back(Branch{far_bound, tree_id, left_first ? node.link : id + 1,
+                                static_cast<std::uint32_t>(s.trail.size())});
+        s.trail.push_back(Term{far_term, axis, trail});
+        std::push_heap(s.heap.begin(), s.heap.end(), After{});
       }
       id = left_first ? id + 1 : node.link;
     }
   };
 
-  // Walks from the root of a tree to `target`, setting s.terms to the target's cell and returning
-  // its bound: the same arithmetic, in the same order, as the descent that queued it.
-  auto enter = [&](std::uint32_t tree_id, std::uint32_t target) {
-    const Tree& tree = trees_[tree_id];
-    double bound = 0;
-    std::uint32_t id = 0;
-    while (id != target) {
-      const Node& node = tree.nodes[id];
-      const std::uint32_t axis = node.axis();
-      const double x = s.query[axis];
-      const double to_left = x - node.left_max;
-      const double to_right = node.right_min - x;
-      const bool left_first = to_left <= to_right;
-      const bool go_left = target < node.link;
-      if (go_left != left_first) {  // the far child: its axis share grows
-        const double far_gap = left_first ? to_right : to_left;
-        bound = bound - s.terms[axis] + far_gap * far_gap;
-        if (s.terms[axis] == 0) s.touched.push_back(axis);
-        s.terms[axis] = far_gap * far_gap;
-      }
-      id = go_left ? id + 1 : node.link;
-    }
-    return bound;
-  };
-
   const std::size_t trees_used = search.trees == 0 ? trees_.size() : std::min(search.trees, trees_.size());
-  for (std::size_t t = 0; t < trees_used; ++t) descend(static_cast<std::uint32_t>(t), 0, 0.0);
+  for (std::size_t t = 0; t < trees_used; ++t) descend(static_cast<std::uint32_t>(t), 0, 0.0, Scratch::no_trail);
   while (!s.heap.empty()) {
     if (checks >= budget && results.full()) break;
     const Branch next = s.heap.front();
     if (prunable(next.bound, results.bound())) break;  // the queue holds nothing nearer
-    std::pop_heap(s.heap.begin(), s.heap.end(), Scratch::after);
+    std::pop_heap(s.heap.begin(), s.heap.end(), After{});
     s.heap.pop_back();
-    const double bound = enter(next.tree, next.node);
-    descend(next.tree, next.node, bound);
-    for (std::uint32_t axis : s.touched) s.terms[axis] = 0;
-    s.touched.clear();
+    s.enter(next.trail);
+    descend(next.tree, next.node, next.bound, next.trail);
+    s.leave();
   }
   stats.queries += 1;
   stats.points_visited += checks;
