@@ -409,6 +409,14 @@ void check_search(const ForestSearchParams& s, std::size_t k, std::size_t n) {
 template <class T>
 void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& s,
                             QueryStats& stats, Neighbor<T>* out) const {
+  if (compact()) search_rows(bytes_.data(), q, k, search, s, stats, out);
+  else search_rows(points_.data(), q, k, search, s, stats, out);
+}
+
+template <class T>
+template <class U>
+void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, const ForestSearchParams& search,
+                                 Scratch& s, QueryStats& stats, Neighbor<T>* out) const {
   using Branch = typename Scratch::Branch;
   using Term = typename Scratch::Term;
   using After = typename Scratch::After;
@@ -434,57 +442,56 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
   // where slack covers the projected coordinates' rounding to float (the split bounds are such
   // floats) and the double-precision projection, and abs_err the rounding of the incremental bound.
   // The computed internal distance may be smaller than |p - q|^2 by the relative error `shrink`,
-  // and by `underflow` where tiny coordinates make it flush towards zero.
+  // and by `underflow` where tiny coordinates make it flush towards zero. So a cell cannot hold a
+  // point nearer than the k-th when (sqrt(B - abs_err) - slack)^2 * shrink - underflow > kth, that is
+  // when B > abs_err + (slack + sqrt((kth + underflow) / shrink))^2: the threshold below, raised by a
+  // relative 1e-9 for its own few roundings. It changes only when the k-th does.
   const double reach = extent_ + std::sqrt(q_norm2);
   const double slack = std::sqrt(static_cast<double>(m)) *
                        (extent_ * std::numeric_limits<float>::epsilon() + reach * 1e-10);
   const double abs_err = 1e-12 * reach * reach;
   const double shrink = 1.0 - 4.0 * static_cast<double>(d + 2) * std::numeric_limits<T>::epsilon();
   const double underflow = 4.0 * static_cast<double>(d + 2) * static_cast<double>(std::numeric_limits<T>::min());
-  auto prunable = [&](double bound, T kth) {
-    if (!std::isfinite(static_cast<double>(kth))) return false;
-    const double lower = std::sqrt(std::max(0.0, bound - abs_err)) - slack;
-    return lower > 0 && lower * lower * shrink - underflow > static_cast<double>(kth);
+  auto threshold = [&](T kth) {
+    const double root = slack + std::sqrt((static_cast<double>(kth) + underflow) / shrink);
+    return (abs_err + root * root) * (1 + 1e-9);  // infinite while fewer than k are in hand
   };
 
   detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), s.results);
+  double prune_above = threshold(results.bound());
   const std::size_t budget = search.checks;
-  const bool compact = !bytes_.empty();
-  const std::size_t row_bytes = d * (compact ? 1 : sizeof(T));
-  auto row_start = [&](std::uint32_t r) {
-    return compact ? reinterpret_cast<const char*>(bytes_.data() + std::size_t{r} * d)
-                   : reinterpret_cast<const char*>(points_.data() + std::size_t{r} * d);
-  };
-  auto score = [&](std::uint32_t r) {
-    const T limit = results.bound();
-    const T dist = compact ? l2_distance_or_more(q, bytes_.data() + std::size_t{r} * d, d, limit)
-                           : l2_distance_or_more(q, points_.data() + std::size_t{r} * d, d, limit);
-    // Most points do not enter: their original index (a cache miss) is read only for those that may.
-    if (dist <= limit) results.offer(dist, ids_[r]);
-  };
-  std::size_t checks = 0;
+  const std::size_t row_lines = (d * sizeof(U) + 63) / 64;
+  std::size_t checks = 0, nodes_visited = 0;
+  const std::uint32_t epoch = s.epoch;
+  std::uint32_t* const stamp = s.stamp.data();
 
   // Descends from `id` (whose cell bound is `bound`, s.terms holding its terms, `trail` their trail)
   // to a leaf, queueing the far child at every step, then scores the leaf.
   auto descend = [&](std::uint32_t tree_id, std::uint32_t id, double bound, std::uint32_t trail) {
     const Tree& tree = trees_[tree_id];
+    const Node* const nodes = tree.nodes.data();
     for (;;) {
-      const Node& node = tree.nodes[id];
-      ++stats.nodes_visited;
+      const Node& node = nodes[id];
+      ++nodes_visited;
       if (node.is_leaf()) {
         const std::uint32_t* row = tree.order.data() + node.link;
+        const std::uint32_t count = node.count();
         // The rows of a leaf lie anywhere in memory (only the first tree's leaves are contiguous):
         // ask for all of them before scoring the first, so their cache misses overlap.
-        for (std::uint32_t i = 0; i < node.count(); ++i) {
-          const char* first_byte = row_start(row[i]);
-          for (std::size_t offset = 0; offset < row_bytes; offset += 64) __builtin_prefetch(first_byte + offset);
+        for (std::uint32_t i = 0; i < count; ++i) {
+          const char* first_byte = reinterpret_cast<const char*>(points + std::size_t{row[i]} * d);
+          for (std::size_t line = 0; line < row_lines; ++line) __builtin_prefetch(first_byte + 64 * line);
         }
-        for (std::uint32_t i = 0; i < node.count(); ++i) {
+        for (std::uint32_t i = 0; i < count; ++i) {
           const std::uint32_t r = row[i];
-          if (s.stamp[r] == s.epoch) continue;
-          s.stamp[r] = s.epoch;
+          if (stamp[r] == epoch) continue;
+          stamp[r] = epoch;
           ++checks;
-          score(r);
+          const T limit = results.bound();
+          const T dist = l2_distance_or_more(q, points + std::size_t{r} * d, d, limit);
+          // Most points do not enter: their original index (a cache miss) is read only for those
+          // that may.
+          if (dist <= limit && results.offer(dist, ids_[r])) prune_above = threshold(results.bound());
         }
         return;
       }
@@ -496,7 +503,7 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
       const double far_gap = left_first ? to_right : to_left;
       const double far_term = far_gap * far_gap;
       const double far_bound = bound - s.terms[axis] + far_term;
-      if (!prunable(far_bound, results.bound())) {
+      if (!(far_bound > prune_above)) {
         s.heap.push_back(Branch{far_bound, tree_id, left_first ? node.link : id + 1,
                                 static_cast<std::uint32_t>(s.trail.size())});
         s.trail.push_back(Term{far_term, axis, trail});
@@ -511,7 +518,7 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
   while (!s.heap.empty()) {
     if (checks >= budget && results.full()) break;
     const Branch next = s.heap.front();
-    if (prunable(next.bound, results.bound())) break;  // the queue holds nothing nearer
+    if (next.bound > prune_above) break;  // the queue holds nothing nearer
     std::pop_heap(s.heap.begin(), s.heap.end(), After{});
     s.heap.pop_back();
     s.enter(next.trail);
@@ -520,6 +527,7 @@ void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams&
   }
   stats.queries += 1;
   stats.points_visited += checks;
+  stats.nodes_visited += nodes_visited;
   for (const auto& c : results.sorted()) *out++ = Neighbor<T>{c.index, L2::to_distance(c.dist)};
 }
 

@@ -20,7 +20,7 @@ std::vector<Neighbor<T>> brute_force_knn(const T* rows, std::size_t n, std::size
   std::vector<detail::Candidate<T>> all(n);
   for (std::size_t i = 0; i < n; ++i)
     all[i] = {internal_distance<Metric>(q, rows + i * dim, dim), static_cast<std::uint32_t>(i)};
-  std::partial_sort(all.begin(), all.begin() + static_cast<std::ptrdiff_t>(k), all.end(), detail::comes_before<T>);
+  std::partial_sort(all.begin(), all.begin() + static_cast<std::ptrdiff_t>(k), all.end(), detail::comes_before);
   std::vector<Neighbor<T>> out;
   for (std::size_t i = 0; i < k; ++i) out.push_back({all[i].index, Metric::to_distance(all[i].dist)});
   return out;
@@ -35,7 +35,7 @@ std::vector<Neighbor<T>> brute_force_radius(const T* rows, std::size_t n, std::s
     const T d = internal_distance<Metric>(q, rows + i * dim, dim);
     if (d <= limit) found.push_back({d, static_cast<std::uint32_t>(i)});
   }
-  std::sort(found.begin(), found.end(), detail::comes_before<T>);
+  std::sort(found.begin(), found.end(), detail::comes_before);
   std::vector<Neighbor<T>> out;
   for (const auto& c : found) out.push_back({c.index, Metric::to_distance(c.dist)});
   return out;

@@ -183,6 +183,9 @@ class PointForest {
 
   void search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch, QueryStats& stats,
               Neighbor<T>* out) const;
+  template <class U>  // U: T, or std::uint8_t when compact
+  void search_rows(const U* points, const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch,
+                   QueryStats& stats, Neighbor<T>* out) const;
   ForestTuning tune_on(double target_recall, std::size_t k, const std::vector<T>& queries,
                        const std::vector<Index>& self, std::size_t half, const TuneParams& params) const;
 

@@ -16,11 +16,15 @@ struct Candidate {
   std::uint32_t index;
 };
 
-/// The order of results: ascending distance, ties by ascending index.
-template <class T>
-bool comes_before(const Candidate<T>& a, const Candidate<T>& b) {
-  return a.dist < b.dist || (a.dist == b.dist && a.index < b.index);
-}
+/// The order of results: ascending distance, ties by ascending index. A function object, so that
+/// the heap and sort algorithms inline it.
+struct ComesBefore {
+  template <class T>
+  bool operator()(const Candidate<T>& a, const Candidate<T>& b) const {
+    return a.dist < b.dist || (a.dist == b.dist && a.index < b.index);
+  }
+};
+inline constexpr ComesBefore comes_before{};
 
 /// Keeps the k first candidates in (distance, index) order among those with dist <= limit.
 /// A max-heap on that order; its top is the one to evict.
@@ -44,19 +48,19 @@ class KnnResults {
     if (heap_.size() < k_) {
       if (!(dist <= limit_)) return false;
       heap_.push_back(c);
-      std::push_heap(heap_.begin(), heap_.end(), comes_before<T>);
+      std::push_heap(heap_.begin(), heap_.end(), comes_before);
       return true;
     }
     if (!comes_before(c, heap_.front())) return false;
-    std::pop_heap(heap_.begin(), heap_.end(), comes_before<T>);
+    std::pop_heap(heap_.begin(), heap_.end(), comes_before);
     heap_.back() = c;
-    std::push_heap(heap_.begin(), heap_.end(), comes_before<T>);
+    std::push_heap(heap_.begin(), heap_.end(), comes_before);
     return true;
   }
 
   /// The kept candidates in result order.
   std::vector<Candidate<T>>& sorted() {
-    std::sort_heap(heap_.begin(), heap_.end(), comes_before<T>);
+    std::sort_heap(heap_.begin(), heap_.end(), comes_before);
     return heap_;
   }
 
@@ -84,7 +88,7 @@ class RangeResults {
   }
 
   std::vector<Candidate<T>>& sorted() {
-    std::sort(found_.begin(), found_.end(), comes_before<T>);
+    std::sort(found_.begin(), found_.end(), comes_before);
     return found_;
   }
 
