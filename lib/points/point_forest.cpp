@@ -462,6 +462,8 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
   const std::size_t budget = search.checks;
   const std::size_t row_lines = (d * sizeof(U) + 63) / 64;
   std::size_t checks = 0, nodes_visited = 0;
+  const std::size_t trees_used = search.trees == 0 ? trees_.size() : std::min(search.trees, trees_.size());
+  const bool stamped = trees_used > 1;
   const std::uint32_t epoch = s.epoch;
   std::uint32_t* const stamp = s.stamp.data();
 
@@ -474,18 +476,23 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
       const Node& node = nodes[id];
       ++nodes_visited;
       if (node.is_leaf()) {
-        const std::uint32_t* row = tree.order.data() + node.link;
         const std::uint32_t count = node.count();
-        // The rows of a leaf lie anywhere in memory (only the first tree's leaves are contiguous):
-        // ask for all of them before scoring the first, so their cache misses overlap.
+        // The first tree's leaves are runs of rows (the copy follows its leaf order), so its leaf
+        // order is not read. Other trees' rows lie anywhere: ask for all of them before scoring the
+        // first, so their cache misses overlap. With one tree no row can come twice: no stamps.
+        const bool in_order = tree_id == 0;
+        const std::uint32_t* row = tree.order.data() + node.link;
+        auto row_at = [&](std::uint32_t i) { return in_order ? node.link + i : row[i]; };
         for (std::uint32_t i = 0; i < count; ++i) {
-          const char* first_byte = reinterpret_cast<const char*>(points + std::size_t{row[i]} * d);
+          const char* first_byte = reinterpret_cast<const char*>(points + std::size_t{row_at(i)} * d);
           for (std::size_t line = 0; line < row_lines; ++line) __builtin_prefetch(first_byte + 64 * line);
         }
         for (std::uint32_t i = 0; i < count; ++i) {
-          const std::uint32_t r = row[i];
-          if (stamp[r] == epoch) continue;
-          stamp[r] = epoch;
+          const std::uint32_t r = row_at(i);
+          if (stamped) {
+            if (stamp[r] == epoch) continue;
+            stamp[r] = epoch;
+          }
           ++checks;
           const T limit = results.bound();
           const T dist = l2_distance_or_more(q, points + std::size_t{r} * d, d, limit);
@@ -513,7 +520,6 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
     }
   };
 
-  const std::size_t trees_used = search.trees == 0 ? trees_.size() : std::min(search.trees, trees_.size());
   for (std::size_t t = 0; t < trees_used; ++t) descend(static_cast<std::uint32_t>(t), 0, 0.0, Scratch::no_trail);
   while (!s.heap.empty()) {
     if (checks >= budget && results.full()) break;
