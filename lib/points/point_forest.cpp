@@ -6,6 +6,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <random>
@@ -17,6 +18,7 @@
 #include "kdspace/points/detail/input_checks.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
+#include "kdspace/points/detail/row_distances.hpp"
 
 namespace kdspace {
 namespace {
@@ -137,36 +139,6 @@ class TreeBuilder {
   std::vector<std::size_t> axes_;
   std::vector<double> axes_mean_;
 };
-
-/// internal_distance<L2>(a, b, dim), or, as soon as the distance is sure to exceed `limit`, some
-/// value above `limit`. The lanes and their combination are those of internal_distance(), so when
-/// it runs to the end the result is the same bit for bit; on the way, the lanes' partial sums
-/// combined in the same order can only grow (every term is >= 0 and rounding is monotone), so a
-/// partial combination above `limit` proves the full one is above it too.
-template <class T, class U>
-T l2_distance_or_more(const T* a, const U* b, std::size_t dim, T limit) {
-  constexpr std::size_t lanes = 8, blocks_between_checks = 4;
-  const std::size_t blocks = dim / lanes;
-  if (blocks < 2 * blocks_between_checks) return internal_distance<L2>(a, b, dim);
-  T acc[lanes] = {};
-  for (std::size_t block = 0; block < blocks; ++block) {
-    const T* x = a + block * lanes;
-    const U* y = b + block * lanes;
-    for (std::size_t j = 0; j < lanes; ++j) acc[j] = L2::accumulate(acc[j], L2::term(x[j] - static_cast<T>(y[j])));
-    if ((block + 1) % blocks_between_checks == 0 && block + 1 < blocks) {
-      T partial[lanes];
-      for (std::size_t j = 0; j < lanes; ++j) partial[j] = acc[j];
-      for (std::size_t width = lanes / 2; width > 0; width /= 2)
-        for (std::size_t j = 0; j < width; ++j) partial[j] = L2::accumulate(partial[j], partial[j + width]);
-      if (partial[0] > limit) return partial[0];
-    }
-  }
-  for (std::size_t width = lanes / 2; width > 0; width /= 2)
-    for (std::size_t j = 0; j < width; ++j) acc[j] = L2::accumulate(acc[j], acc[j + width]);
-  T total = acc[0];
-  for (std::size_t i = blocks * lanes; i < dim; ++i) total = L2::accumulate(total, L2::term(a[i] - static_cast<T>(b[i])));
-  return total;
-}
 
 /// Whether every coordinate is an integer from 0 to 255 (so that a byte holds it exactly).
 template <class T>
@@ -369,6 +341,7 @@ struct PointForest<T>::Scratch {
   std::vector<std::uint32_t> touched;
   std::vector<Branch> heap;
   std::vector<Term> trail;
+  std::vector<std::uint32_t> arriving, ready;  // rows of the leaf being reached, and of the one before
   std::vector<std::uint32_t> stamp;
   std::uint32_t epoch = 0;
   std::vector<detail::Candidate<T>> results;
@@ -381,6 +354,8 @@ struct PointForest<T>::Scratch {
     set.assign(m, 0);
     heap.clear();
     trail.clear();
+    arriving.clear();
+    ready.clear();
   }
 
   // Sets `terms` to those of the cell whose trail starts at `t`; `touched` lists the axes set.
@@ -461,14 +436,37 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
   double prune_above = threshold(results.bound());
   const std::size_t budget = search.checks;
   const std::size_t row_lines = (d * sizeof(U) + 63) / 64;
+  constexpr std::uint32_t group = sizeof(T) == 4 ? 4 : 2;
   std::size_t checks = 0, nodes_visited = 0;
   const std::size_t trees_used = search.trees == 0 ? trees_.size() : std::min(search.trees, trees_.size());
   const bool stamped = trees_used > 1;
   const std::uint32_t epoch = s.epoch;
   std::uint32_t* const stamp = s.stamp.data();
 
+  // The rows of a leaf lie far from the tree and from each other (but for the first tree's): they
+  // are asked for when the descent reaches the leaf and scored one leaf later, when they have
+  // arrived. s.ready holds the rows of the last leaf reached, not yet scored.
+  auto score_ready = [&] {
+    const std::uint32_t* todo = s.ready.data();
+    const std::size_t fresh = s.ready.size();
+    // `group` rows at a time (the last group padded with repeats).
+    for (std::size_t first = 0; first < fresh; first += group) {
+      const U* rows[group];
+      for (std::size_t g = 0; g < group; ++g) rows[g] = points + std::size_t{todo[std::min(first + g, fresh - 1)]} * d;
+      const T limit = results.bound();
+      T dist[group];
+      detail::l2_distances_or_more<group>(q, rows, d, limit, dist);
+      // Most points do not enter: their original index (a cache miss) is read only for those that
+      // may. A distance above `limit` may be partial: only exact ones are offered.
+      for (std::size_t g = 0; g < group && first + g < fresh; ++g)
+        if (dist[g] <= limit && results.offer(dist[g], ids_[todo[first + g]])) prune_above = threshold(results.bound());
+    }
+    s.ready.clear();
+  };
+
   // Descends from `id` (whose cell bound is `bound`, s.terms holding its terms, `trail` their trail)
-  // to a leaf, queueing the far child at every step, then scores the leaf.
+  // to a leaf, queueing the far child at every step; then asks for the leaf's rows and scores those
+  // of the leaf reached before.
   auto descend = [&](std::uint32_t tree_id, std::uint32_t id, double bound, std::uint32_t trail) {
     const Tree& tree = trees_[tree_id];
     const Node* const nodes = tree.nodes.data();
@@ -476,30 +474,23 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
       const Node& node = nodes[id];
       ++nodes_visited;
       if (node.is_leaf()) {
-        const std::uint32_t count = node.count();
         // The first tree's leaves are runs of rows (the copy follows its leaf order), so its leaf
-        // order is not read. Other trees' rows lie anywhere: ask for all of them before scoring the
-        // first, so their cache misses overlap. With one tree no row can come twice: no stamps.
+        // order is not read. With one tree no row can come twice: no stamps.
         const bool in_order = tree_id == 0;
         const std::uint32_t* row = tree.order.data() + node.link;
-        auto row_at = [&](std::uint32_t i) { return in_order ? node.link + i : row[i]; };
-        for (std::uint32_t i = 0; i < count; ++i) {
-          const char* first_byte = reinterpret_cast<const char*>(points + std::size_t{row_at(i)} * d);
-          for (std::size_t line = 0; line < row_lines; ++line) __builtin_prefetch(first_byte + 64 * line);
-        }
-        for (std::uint32_t i = 0; i < count; ++i) {
-          const std::uint32_t r = row_at(i);
+        for (std::uint32_t i = 0; i < node.count(); ++i) {
+          const std::uint32_t r = in_order ? node.link + i : row[i];
           if (stamped) {
             if (stamp[r] == epoch) continue;
             stamp[r] = epoch;
           }
-          ++checks;
-          const T limit = results.bound();
-          const T dist = l2_distance_or_more(q, points + std::size_t{r} * d, d, limit);
-          // Most points do not enter: their original index (a cache miss) is read only for those
-          // that may.
-          if (dist <= limit && results.offer(dist, ids_[r])) prune_above = threshold(results.bound());
+          s.arriving.push_back(r);
+          const char* first_byte = reinterpret_cast<const char*>(points + std::size_t{r} * d);
+          for (std::size_t line = 0; line < row_lines; ++line) __builtin_prefetch(first_byte + 64 * line);
         }
+        checks += s.arriving.size();
+        score_ready();
+        std::swap(s.ready, s.arriving);
         return;
       }
       const std::uint32_t axis = node.axis();
@@ -531,6 +522,7 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
     descend(next.tree, next.node, next.bound, next.trail);
     s.leave();
   }
+  score_ready();
   stats.queries += 1;
   stats.points_visited += checks;
   stats.nodes_visited += nodes_visited;
