@@ -32,18 +32,18 @@ using ColMatrix = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMaj
 constexpr std::size_t query_block = 64;
 constexpr std::size_t point_block = 1024;
 
-template <class T>
-void exact_scan(const ScanData<T>& data, const T* q, std::size_t k, Neighbor<T>* out) {
+template <class T, class U>
+void exact_scan(const ScanData<T>& data, const U* rows, const T* q, std::size_t k, Neighbor<T>* out) {
   std::vector<Candidate<T>> storage;
   KnnResults<T> results(k, std::numeric_limits<T>::infinity(), storage);
   for (std::size_t i = 0; i < data.n; ++i)
-    results.offer(internal_distance<L2>(q, data.points + i * data.dim, data.dim), data.order[i]);
+    results.offer(internal_distance<L2>(q, rows + i * data.dim, data.dim), data.order[i]);
   for (const auto& c : results.sorted()) *out++ = Neighbor<T>{c.index, L2::to_distance(c.dist)};
 }
 
 // Sum over axes of the largest squared centred coordinate, in double: whether estimates may overflow.
-template <class T>
-double centred_norm_bound(const T* row, const T* centre, std::size_t dim) {
+template <class T, class U>
+double centred_norm_bound(const U* row, const T* centre, std::size_t dim) {
   double s = 0;
   for (std::size_t a = 0; a < dim; ++a) {
     const double v = static_cast<double>(row[a]) - static_cast<double>(centre[a]);
@@ -60,18 +60,17 @@ struct QueryState {
   T threshold = std::numeric_limits<T>::infinity();
 };
 
-}  // namespace
-
-template <class T>
-void blocked_scan_knn_l2(const ScanData<T>& data, const T* queries, std::size_t nq, std::size_t k, Neighbor<T>* out) {
+// The scan, on rows held as T or as bytes (converted to T exactly where they are read).
+template <class T, class U>
+void scan_rows(const ScanData<T>& data, const U* rows, const T* queries, std::size_t nq, std::size_t k, Neighbor<T>* out) {
   const std::size_t d = data.dim, n = data.n;
   // Could an estimate overflow? The data's part is bounded from the largest centred row norm; the
   // product's entries are then bounded by the norms. A factor 16 of headroom.
   const double limit = static_cast<double>(std::numeric_limits<T>::max()) / 16;
   double data_norm = 0;
-  for (std::size_t i = 0; i < n; ++i) data_norm = std::max(data_norm, centred_norm_bound(data.points + i * d, data.centre, d));
+  for (std::size_t i = 0; i < n; ++i) data_norm = std::max(data_norm, centred_norm_bound(rows + i * d, data.centre, d));
   if (!(data_norm < limit)) {
-    for (std::size_t q = 0; q < nq; ++q) exact_scan(data, queries + q * d, k, out + q * k);
+    for (std::size_t q = 0; q < nq; ++q) exact_scan(data, rows, queries + q * d, k, out + q * k);
     return;
   }
 
@@ -91,7 +90,7 @@ void blocked_scan_knn_l2(const ScanData<T>& data, const T* queries, std::size_t 
     for (std::size_t j = 0; j < bq_all; ++j) {
       const T* q = queries + (q0 + j) * d;
       if (centred_norm_bound(q, data.centre, d) < limit) block_queries.push_back(q0 + j);
-      else exact_scan(data, q, k, out + (q0 + j) * k);  // absurdly large coordinates: no estimate
+      else exact_scan(data, rows, q, k, out + (q0 + j) * k);  // absurdly large coordinates: no estimate
     }
     const std::size_t bq = block_queries.size();
     if (bq == 0) continue;
@@ -113,10 +112,10 @@ void blocked_scan_knn_l2(const ScanData<T>& data, const T* queries, std::size_t 
     for (std::size_t p0 = 0; p0 < n; p0 += point_block) {
       const std::size_t bp = std::min(point_block, n - p0);
       for (std::size_t i = 0; i < bp; ++i) {
-        const T* p = data.points + (p0 + i) * d;
+        const U* p = rows + (p0 + i) * d;
         T norm = 0;
         for (std::size_t a = 0; a < d; ++a) {
-          const T v = p[a] - data.centre[a];
+          const T v = static_cast<T>(p[a]) - data.centre[a];
           pc(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(a)) = v;
           norm += v * v;
         }
@@ -158,11 +157,19 @@ void blocked_scan_knn_l2(const ScanData<T>& data, const T* queries, std::size_t 
       const T* q = queries + query * d;
       KnnResults<T> results(k, std::numeric_limits<T>::infinity(), storage);
       for (const std::uint32_t row : state[j].rows)
-        results.offer(internal_distance<L2>(q, data.points + static_cast<std::size_t>(row) * d, d), data.order[row]);
+        results.offer(internal_distance<L2>(q, rows + static_cast<std::size_t>(row) * d, d), data.order[row]);
       Neighbor<T>* o = out + query * k;
       for (const auto& c : results.sorted()) *o++ = Neighbor<T>{c.index, L2::to_distance(c.dist)};
     }
   }
+}
+
+}  // namespace
+
+template <class T>
+void blocked_scan_knn_l2(const ScanData<T>& data, const T* queries, std::size_t nq, std::size_t k, Neighbor<T>* out) {
+  if (data.bytes) scan_rows(data, data.bytes, queries, nq, k, out);
+  else scan_rows(data, data.points, queries, nq, k, out);
 }
 
 template void blocked_scan_knn_l2<float>(const ScanData<float>&, const float*, std::size_t, std::size_t,

@@ -62,10 +62,9 @@ NeighborLists<T> PointForest<T>::knn_exact_batch(const T* queries, std::size_t n
   detail::check_query_rows(queries, nq, dim_);
   std::vector<T> centre(dim_);
   for (std::size_t a = 0; a < dim_; ++a) centre[a] = static_cast<T>(mean_[a]);
-  // The scan multiplies matrices of T: byte-valued points are widened for it (exactly) first.
-  std::vector<T> widened(bytes_.begin(), bytes_.end());
-  const T* rows = bytes_.empty() ? points_.data() : widened.data();
-  const detail::ScanData<T> data{rows, ids_.data(), size(), dim_, centre.data()};
+  // Byte rows are widened to T (exactly) block by block inside the scan.
+  const detail::ScanData<T> data{compact() ? nullptr : points_.data(), ids_.data(), size(), dim_, centre.data(),
+                                 compact() ? bytes_.data() : nullptr};
   NeighborLists<T> out;
   out.offsets.resize(nq + 1);
   for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;

@@ -22,11 +22,12 @@ namespace kdspace::detail {
 /// The points as the tree holds them: leaf-ordered rows and each row's original index.
 template <class T>
 struct ScanData {
-  const T* points;              ///< n rows of dim coordinates
+  const T* points;              ///< n rows of dim coordinates (null when `bytes` holds them)
   const std::uint32_t* order;   ///< original index of each row
   std::size_t n;
   std::size_t dim;
   const T* centre;              ///< dim coordinates near the middle of the data
+  const std::uint8_t* bytes = nullptr;  ///< or the rows as bytes (PointForest's compact storage)
 };
 
 /// Exact k-NN (L2, 1 <= k <= n) of queries[0 .. nq) (row-major); out[q * k + i] is the i-th
