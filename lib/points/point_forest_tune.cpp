@@ -209,11 +209,12 @@ ForestTuning PointForest<T>::tune_on(double target_recall, std::size_t k, const 
     }
   }
 
-  // Check on the held-out half; if it falls short, widen the budget until it does not.
+  // Check on the held-out half; if it falls short, widen the budget an eighth at a time until it does
+  // not (doubling would overshoot: the budget the tuning half needed is usually nearly enough).
   if (validation_count > 0) {
     Outcome held_out = evaluate(best.trees, best.checks, validation_first, validation_count, exact_validation);
     while (held_out.recall < target_recall && best.checks < cap) {
-      best.checks = std::min(2 * best.checks, cap);
+      best.checks = std::min(best.checks + std::max<std::size_t>(1, best.checks / 8), cap);
       held_out = evaluate(best.trees, best.checks, validation_first, validation_count, exact_validation);
       const Outcome tuned = evaluate(best.trees, best.checks, 0, half, exact_tuning);
       best.tuning_recall = tuned.recall;

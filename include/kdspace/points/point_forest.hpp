@@ -157,7 +157,8 @@ class PointForest {
   /// The cheapest (trees, checks) whose mean recall@k reaches `target_recall` (in (0, 1]) on sample
   /// queries; cheapest by measured time. Exact answers come from the blocked scan. The setting is
   /// then checked on as many other sample queries (validation_recall); if it falls short there, the
-  /// budget is doubled until it does not (or reaches max_checks). The sample is drawn with the seed.
+  /// budget grows an eighth at a time until it does not (or reaches max_checks). The sample is drawn
+  /// with the seed.
   ///
   /// This form samples the queries from `queries` (nq rows; up to 2 * sample_queries of them):
   /// queries like the ones to be answered give the truest setting.
