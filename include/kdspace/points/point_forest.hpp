@@ -5,7 +5,8 @@
 //  - Build: the data's mean and principal directions are computed (covariance of a sample, Eigen's
 //    self-adjoint eigensolver), and every point is projected onto the `projected_dims` leading
 //    directions (by default as many as hold 90% of the variance, from 24 to 64: data whose variance
-//    is spread over many directions, where the cells must follow local structure, keep more). Each tree splits those projected coordinates: at each node the axis is drawn at
+//    is spread over many directions, where the cells must follow local structure, keep more). Each
+//    tree splits those projected coordinates: at each node the axis is drawn at
 //    random among the `candidate_axes` of largest variance (measured on a sample of the node's
 //    points), the position is the median. Trees differ only in their random draws, made by a
 //    generator seeded with (seed, tree number): the forest is the same for any thread count.
@@ -14,15 +15,21 @@
 //    branch's cell (a true lower bound in the projected space, updated one axis at a time). Branches
 //    are then taken from the queue, nearest first, until `checks` points have been scored (and k are
 //    in hand) or no cell can hold a closer point. A point met in several trees is scored once.
+//  - What a search costs is mostly waiting for memory, so: a queued branch carries its cell's
+//    per-axis terms as a trail (the one term it changed, then its parent's trail), and taking it
+//    needs no walk from the root; a leaf's rows are asked for (prefetched) when the descent reaches
+//    it and scored when the next leaf is reached, four rows at a time (row_distances.hpp: the same
+//    bits as internal_distance(), row by row); the copy of the points follows the first tree's
+//    leaf order, so that tree's leaves are runs of rows.
 //  - Points are scored with internal_distance() on the original coordinates, never the projected
 //    ones: every returned distance is exact, and with an unlimited budget the answer is the exact
 //    k-NN (same distances as brute_force_knn() and PointTree, ties by smaller index). The pruning
 //    test allows for the rounding of the projection (a margin from the data's extent), so it never
 //    drops a cell that could hold a neighbour.
 //
-// Memory: a copy of the points (n * dim * sizeof(T), or n * dim bytes for byte-valued data), the original index of each (4 bytes a point),
-// and per tree the leaf order of the points (4 bytes a point) and its nodes (16 bytes each, about
-// 2n / leaf_size of them); plus the projection (dim * projected_dims doubles). memory_bytes() gives
+// Memory: a copy of the points (n * dim * sizeof(T), or n * dim bytes for byte-valued data), the
+// original index of each (4 bytes a point), and per tree the leaf order of the points (4 bytes a
+// point) and its nodes (16 bytes each, about 2n / leaf_size of them); plus the projection (dim * projected_dims doubles). memory_bytes() gives
 // the exact figure. The projected coordinates are only needed while building.
 #pragma once
 
