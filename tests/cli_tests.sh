@@ -88,6 +88,11 @@ def write_fvecs(path, rows):
         for r in rows:
             f.write(struct.pack("<i%df" % len(r), len(r), *r))
 
+def write_bvecs(path, rows):
+    with open(path, "wb") as f:
+        for r in rows:
+            f.write(struct.pack("<i%dB" % len(r), len(r), *r))
+
 def write_npy(path, rows, dtype="<f4"):
     fmt = {"<f4": "f", "<f8": "d"}[dtype]
     header = "{'descr': '%s', 'fortran_order': False, 'shape': (%d, %d), }" % (dtype, len(rows), len(rows[0]))
@@ -107,6 +112,7 @@ write_csv("query.csv", query)
 write_npy("base.npy", base)
 write_npy("base64.npy", base, "<f8")
 write_fvecs("query.fvecs", query)
+write_bvecs("base.bvecs", base)
 write_csv("query4.csv", [[1, 2, 3, 4], [5, 6, 7, 8]])
 
 # Radius: two tight groups far apart and a few points between, so rows differ in length.
@@ -122,6 +128,9 @@ write_csv("nan.csv", rows_nan, header="a,b,c")        # data row 3 holds a NaN
 write_fvecs("trunc.fvecs", [[1, 2, 3, 4]] * 3)
 data = open("trunc.fvecs", "rb").read()
 open("trunc.fvecs", "wb").write(data[:-6])             # row 3 cut short
+write_bvecs("trunc.bvecs", base[:4])
+data = open("trunc.bvecs", "rb").read()
+open("trunc.bvecs", "wb").write(data[:-1])             # row 4 cut short
 open("empty.csv", "w").close()
 open("empty.fvecs", "wb").close()
 write_csv("ragged.csv", [[1, 2, 3], [4, 5, 6], [7, 8]])
@@ -237,6 +246,17 @@ if expect_ok "knn --forest on a float32 base" knn --base base.npy --query query.
   --forest 2 --checks 40 --threads 2; then
   check_results "knn --forest float32 equals brute force" knn l2 7 base.csv query.csv
 fi
+# A .bvecs base is read as bytes and kept as bytes, with the same answers.
+if expect_ok "knn --forest on a bvecs base" knn --base base.bvecs --query query.fvecs -k 6 --out ids.ivecs --distances dist.fvecs \
+  --forest 2 --checks 40 --threads 2; then
+  check_results "knn --forest on a bvecs base equals brute force" knn l2 6 base.csv query.csv
+fi
+if expect_ok "knn --forest --stats on a bvecs base" knn --base base.bvecs --query query.csv -k 3 --out ids.ivecs --forest 2 --stats; then
+  if grep -qF '"stored_as": "bytes"' out.txt; then pass "a bvecs base is stored as bytes"
+  else fail "a bvecs base is stored as bytes" "stdout: $(head -c 400 out.txt)"; fi
+fi
+expect_error "knn --forest on a truncated bvecs base" 1 "trunc.bvecs: row 4: truncated" -- \
+  knn --base trunc.bvecs --query query.csv -k 3 --out ids.ivecs --forest 2
 if expect_ok "radius" radius --base cluster.csv --query cluster_query.csv -r 1.5 --out ids.ivecs --distances dist.fvecs; then
   check_results "radius rows of differing lengths equal brute force" radius l2 1.5 cluster.csv cluster_query.csv
 fi

@@ -153,6 +153,32 @@ TEST_CASE("ivecs and bvecs files are read as points, converting the values", "[i
   require_equal(io::read_points<float>(bv), matrix<float>(1, 3, {0, 128, 255}));
 }
 
+TEST_CASE("points are read as bytes from any format whose values are integers from 0 to 255", "[io]") {
+  TempDir tmp;
+  const std::string bv = tmp.file("p.bvecs"), c = tmp.file("p.csv");
+  write_file(bv, Bytes().add(std::int32_t{3}).add(std::uint8_t{0}).add(std::uint8_t{128}).add(std::uint8_t{255})
+                     .add(std::int32_t{3}).add(std::uint8_t{7}).add(std::uint8_t{8}).add(std::uint8_t{9}).str());
+  require_equal(io::read_points<std::uint8_t>(bv), matrix<std::uint8_t>(2, 3, {0, 128, 255, 7, 8, 9}));
+  write_file(c, "x,y\n3,250\n");
+  require_equal(io::read_points<std::uint8_t>(c), matrix<std::uint8_t>(1, 2, {3, 250}));
+}
+
+TEST_CASE("reading bytes, a value that is no byte names its row and column", "[io][errors]") {
+  TempDir tmp;
+  const std::string c = tmp.file("p.csv"), f = tmp.file("p.fvecs");
+  write_file(c, "1,2\n3,256\n");
+  CHECK(error_message([&] { io::read_points<std::uint8_t>(c); }) ==
+        at(c, "row 2 (line 2)") + "column 2: value 256 is not an integer in 0..255");
+  io::write_points(f, matrix<float>(2, 2, {1, 2, 0.5f, 4}));
+  CHECK(error_message([&] { io::read_points<std::uint8_t>(f); }) ==
+        at(f, "row 2") + "column 1: value 0.5 is not an integer in 0..255");
+  io::write_points(f, matrix<float>(1, 2, {-1, 4}));
+  CHECK(error_message([&] { io::read_points<std::uint8_t>(f); }) ==
+        at(f, "row 1") + "column 1: value -1 is not an integer in 0..255");
+  io::write_points(f, matrix<float>(1, 2, {std::numeric_limits<float>::quiet_NaN(), 4}));
+  CHECK(error_message([&] { io::read_points<std::uint8_t>(f); }) == at(f, "row 1") + "column 1: value is not finite (nan)");
+}
+
 TEST_CASE("npy headers of versions 2.0 and 3.0 and dtypes <i4 and |u1 are read", "[io]") {
   TempDir tmp;
   const std::string p2 = tmp.file("v2.npy"), p3 = tmp.file("v3.npy"), pu = tmp.file("u1.npy");

@@ -242,6 +242,12 @@ TEST_CASE("forest: bad parameters and inputs get clear errors", "[points][forest
   auto bad = pts;
   bad[5 * 8 + 2] = std::numeric_limits<float>::quiet_NaN();
   CHECK_THROWS_WITH(PointForest<float>(bad.data(), 100, 8), Catch::Contains("row 6: coordinate 3 is not finite"));
+  const std::vector<std::uint8_t> byte_rows(800, 7);
+  CHECK_THROWS_WITH(PointForest<float>(byte_rows.data(), 0, 8), Catch::Contains("empty"));
+  CHECK_THROWS_WITH(PointForest<double>(byte_rows.data(), 100, 0), Catch::Contains("dimension 0"));
+  CHECK_THROWS_WITH(PointForest<float>(static_cast<const std::uint8_t*>(nullptr), 100, 8), Catch::Contains("null pointer"));
+  CHECK_THROWS_WITH(PointForest<float>(byte_rows.data(), 100, 8, with([](ForestParams& p) { p.trees = 0; })),
+                    Catch::Contains("trees must be at least 1"));
 
   const PointForest<float> forest(pts.data(), 100, 8);
   CHECK_THROWS_WITH(forest.knn(pts.data(), 0), Catch::Contains("k must be at least 1"));
@@ -344,6 +350,25 @@ TEST_CASE("forest: byte-valued points are kept as bytes, with the same answers b
       bool same = a.neighbors.size() == b.neighbors.size();
       for (std::size_t i = 0; same && i < a.neighbors.size(); ++i)
         same = a.neighbors[i].index == b.neighbors[i].index && a.neighbors[i].distance == b.neighbors[i].distance;
+      CHECK(same);
+    }
+  }
+  // Built from byte rows, the forest is the same, kept as bytes or widened.
+  const std::vector<std::uint8_t> byte_rows(pts.begin(), pts.end());
+  ForestParams from_bytes_wide = wide;
+  const PointForest<float> from_bytes(byte_rows.data(), n, dim), from_bytes_widened(byte_rows.data(), n, dim, from_bytes_wide);
+  CHECK(from_bytes.compact());
+  CHECK_FALSE(from_bytes_widened.compact());
+  CHECK(from_bytes.memory_bytes() == bytes.memory_bytes());
+  CHECK(from_bytes.projected_dims() == bytes.projected_dims());
+  for (std::size_t checks : {std::size_t{16}, std::size_t{200}, kdspace::unlimited_checks}) {
+    INFO("dim " << dim << ", from byte rows, checks " << checks);
+    const auto want = bytes.knn_batch(queries.data(), nq, 10, {checks, 0}, 1);
+    for (const PointForest<float>* f : {&from_bytes, &from_bytes_widened}) {
+      const auto got = f->knn_batch(queries.data(), nq, 10, {checks, 0}, 2);
+      bool same = got.neighbors.size() == want.neighbors.size();
+      for (std::size_t i = 0; same && i < got.neighbors.size(); ++i)
+        same = got.neighbors[i].index == want.neighbors[i].index && got.neighbors[i].distance == want.neighbors[i].distance;
       CHECK(same);
     }
   }

@@ -40,7 +40,8 @@ Finds the K nearest base points of every query point.
   --eps E              approximate, on the exact tree: the i-th result within (1+E) of the true
                        i-th (default 0: exact)
   --forest T           approximate, for high dimensions: T randomized kd-trees (1..1024) searched
-                       together, best bin first, l2 only; the distances returned are exact
+                       together, best bin first, l2 only; the distances returned are exact;
+                       byte-valued points (a .bvecs base) are kept as bytes, a quarter of the memory
   --checks C           with --forest: points scored per query (default 256); more is slower and
                        finds more of the true neighbours
   --recall R           tune the forest (T trees, default 8) for a mean recall@K of R (0 < R <= 1)
@@ -212,15 +213,17 @@ Error in_query_file(const Error& e, const SearchJob& job) {
   return Error(starts_with(what, prefix) ? job.query + ": row " + what.substr(prefix.size()) : what);
 }
 
-/// The base and query files, read and checked against each other (and k against the base).
-template <class T>
+/// The base and query files, read and checked against each other (and k against the base). The base
+/// may be read as bytes (B = std::uint8_t: a .bvecs base for the forest, a quarter of the memory).
+template <class T, class B = T>
 struct Inputs {
-  io::Matrix<T> base, queries;
+  io::Matrix<B> base;
+  io::Matrix<T> queries;
 };
 
-template <class T>
-Inputs<T> read_inputs(const SearchJob& job) {
-  Inputs<T> in{read_with_progress<T>(job.base), read_with_progress<T>(job.query)};
+template <class T, class B = T>
+Inputs<T, B> read_inputs(const SearchJob& job) {
+  Inputs<T, B> in{read_with_progress<B>(job.base), read_with_progress<T>(job.query)};
   if (in.queries.cols != in.base.cols)
     throw Error(job.query + ": dimension " + std::to_string(in.queries.cols) + " does not match the base (" +
                 job.base + ": dimension " + std::to_string(in.base.cols) + ")");
@@ -325,11 +328,11 @@ int run_search(const SearchJob& job) {
 }
 
 // The forest's counterpart of run_search: build (and tune), search, write, and measure the recall on
-// a sample of the queries.
-template <class T>
+// a sample of the queries. B: the type the base is read as (T, or std::uint8_t for a .bvecs base).
+template <class T, class B = T>
 int run_forest_search(const SearchJob& job) {
-  Inputs<T> in = read_inputs<T>(job);
-  io::Matrix<T>& base = in.base;
+  Inputs<T, B> in = read_inputs<T, B>(job);
+  io::Matrix<B>& base = in.base;
   const io::Matrix<T>& queries = in.queries;
 
   ForestParams params;
@@ -467,6 +470,7 @@ int run_search_command(Mode mode, const std::vector<std::string>& args) {
     io::format_from_path(job.query);
     if (job.forest_trees > 0) {
       if (io::stores_double(job.base)) return run_forest_search<double>(job);
+      if (io::format_from_path(job.base) == io::Format::bvecs) return run_forest_search<float, std::uint8_t>(job);
       return run_forest_search<float>(job);
     }
     return with_tree_type(job, [&](auto scalar, auto metric) {

@@ -123,10 +123,11 @@ void store(double v, Elem e, unsigned char* p, const RowRef& at, std::size_t c) 
   }
 }
 
-// A point coordinate read from a file: finite, and within range of T.
+// A point coordinate read from a file: finite, and within range of T (for bytes: an integer in 0..255).
 template <class T>
 T checked_value(double v, const RowRef& at, std::size_t c) {
   if (!std::isfinite(v)) at.fail(column(c) + "value is not finite (" + show(v) + ")");
+  if constexpr (std::is_same_v<T, std::uint8_t>) check_integer(v, 0, 255, at, c);
   if constexpr (std::is_same_v<T, float>) {
     if (std::fabs(v) > std::numeric_limits<float>::max())
       at.fail(column(c) + "value " + show(v) + " does not fit in float");
@@ -664,7 +665,8 @@ bool stores_double(const std::string& path) {
 
 template <class T>
 Matrix<T> read_points(const std::string& path, const std::function<void(double)>& on_progress) {
-  static_assert(std::is_same_v<T, float> || std::is_same_v<T, double>, "points are float or double");
+  static_assert(std::is_same_v<T, float> || std::is_same_v<T, double> || std::is_same_v<T, std::uint8_t>,
+                "points are float, double or bytes");
   const Format f = format_from_path(path);
   InFile in(path, on_progress);
   if (in.size() == 0) fail(path, "empty file, no rows");
@@ -699,6 +701,7 @@ void write_points(const std::string& path, const Matrix<T>& m) {
 
 template Matrix<float> read_points<float>(const std::string&, const std::function<void(double)>&);
 template Matrix<double> read_points<double>(const std::string&, const std::function<void(double)>&);
+template Matrix<std::uint8_t> read_points<std::uint8_t>(const std::string&, const std::function<void(double)>&);
 template void write_points<float>(const std::string&, const Matrix<float>&);
 template void write_points<double>(const std::string&, const Matrix<double>&);
 

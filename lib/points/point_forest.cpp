@@ -141,8 +141,9 @@ class TreeBuilder {
 };
 
 /// Whether every coordinate is an integer from 0 to 255 (so that a byte holds it exactly).
-template <class T>
-bool byte_valued(const T* rows, std::size_t count) {
+template <class U>
+bool byte_valued(const U* rows, std::size_t count) {
+  if constexpr (std::is_same_v<U, std::uint8_t>) return true;
   for (std::size_t i = 0; i < count; ++i)
     if (!(rows[i] >= 0 && rows[i] <= 255 && rows[i] == std::floor(rows[i]))) return false;
   return true;
@@ -166,6 +167,18 @@ void check_params(const ForestParams& p) {
 template <class T>
 PointForest<T>::PointForest(const T* rows, std::size_t n, std::size_t dim, const ForestParams& params)
     : dim_(dim), params_(params) {
+  build(rows, n, dim, params);
+}
+
+template <class T>
+PointForest<T>::PointForest(const std::uint8_t* rows, std::size_t n, std::size_t dim, const ForestParams& params)
+    : dim_(dim), params_(params) {
+  build(rows, n, dim, params);
+}
+
+template <class T>
+template <class U>
+void PointForest<T>::build(const U* rows, std::size_t n, std::size_t dim, const ForestParams& params) {
   check_params(params);
   detail::check_points(rows, n, dim);
 
@@ -261,7 +274,7 @@ PointForest<T>::PointForest(const T* rows, std::size_t n, std::size_t dim, const
     copy.resize(n * dim);
     for (std::size_t r = 0; r < n; ++r)
       std::transform(rows + ids_[r] * dim, rows + ids_[r] * dim + dim, copy.begin() + static_cast<long>(r * dim),
-                     [](T v) { return static_cast<typename std::decay_t<decltype(copy)>::value_type>(v); });
+                     [](U v) { return static_cast<typename std::decay_t<decltype(copy)>::value_type>(v); });
   };
   if (params.compact && byte_valued(rows, n * dim)) gather(bytes_);
   else gather(points_);

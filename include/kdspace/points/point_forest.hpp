@@ -132,6 +132,10 @@ class PointForest {
   /// Builds from n points of `dim` coordinates, row-major. Throws Error for n = 0, dim = 0,
   /// non-finite coordinates, n >= 2^30 and out-of-range parameters.
   PointForest(const T* rows, std::size_t n, std::size_t dim, const ForestParams& params = {});
+  /// Builds from byte rows (SIFT-like descriptors, .bvecs files) without a copy of them as T: the
+  /// forest is the one the T constructor builds from the same values, and gives the same answers bit
+  /// for bit. With ForestParams::compact the points are kept as bytes, else widened to T.
+  PointForest(const std::uint8_t* rows, std::size_t n, std::size_t dim, const ForestParams& params = {});
 
   std::size_t size() const { return ids_.size(); }
   std::size_t dim() const { return dim_; }
@@ -149,7 +153,9 @@ class PointForest {
   const ForestParams& params() const { return params_; }
 
   /// The k nearest points found within the budget, in ascending (true) distance, ties by ascending
-  /// index; always k of them (1 <= k <= size(), else Error). Distances are exact.
+  /// index (decided on the squared distance, as in PointTree: two squared distances an ulp apart
+  /// that share one rounded square root keep their squared order); always k of them
+  /// (1 <= k <= size(), else Error). Distances are exact.
   std::vector<Neighbor<T>> knn(const T* q, std::size_t k, const ForestSearchParams& search = {},
                                QueryStats* stats = nullptr) const;
 
@@ -188,6 +194,9 @@ class PointForest {
     std::size_t leaves = 0;
   };
   struct Scratch;
+
+  template <class U>  // U: T or std::uint8_t
+  void build(const U* rows, std::size_t n, std::size_t dim, const ForestParams& params);
 
   void search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch, QueryStats& stats,
               Neighbor<T>* out) const;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstddef>
 #include <string>
+#include <type_traits>
 
 #include "kdspace/error.hpp"
 
@@ -18,6 +19,7 @@ void check_points(const T* rows, std::size_t n, std::size_t dim) {
   if (n == 0) throw Error("no points: the data is empty");
   if (n >= (std::size_t{1} << 30)) throw Error("too many points: " + std::to_string(n) + " (at most 2^30 - 1)");
   if (rows == nullptr) throw Error("points: null pointer");
+  if constexpr (std::is_integral_v<T>) return;  // every value is finite
   for (std::size_t i = 0; i < n; ++i)
     for (std::size_t a = 0; a < dim; ++a)
       if (!std::isfinite(rows[i * dim + a]))
