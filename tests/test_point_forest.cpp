@@ -345,18 +345,14 @@ TEST_CASE("forest: byte-valued points are kept as bytes, with the same answers b
     INFO("dim " << dim << ", k " << k);
     CHECK(forest_differs(bytes, pts, n, dim, queries, k, unlimited(), 2) == "");
     for (std::size_t checks : {16, 200}) {
-      const auto a = bytes.knn_batch(queries.data(), nq, k, {checks, 0}, 1);
-      const auto b = floats.knn_batch(queries.data(), nq, k, {checks, 0}, 1);
-      bool same = a.neighbors.size() == b.neighbors.size();
-      for (std::size_t i = 0; same && i < a.neighbors.size(); ++i)
-        same = a.neighbors[i].index == b.neighbors[i].index && a.neighbors[i].distance == b.neighbors[i].distance;
-      CHECK(same);
+      CHECK(bytes.knn_batch(queries.data(), nq, k, {checks, 0}, 1).neighbors ==
+            floats.knn_batch(queries.data(), nq, k, {checks, 0}, 1).neighbors);
     }
   }
   // Built from byte rows, the forest is the same, kept as bytes or widened.
   const std::vector<std::uint8_t> byte_rows(pts.begin(), pts.end());
-  ForestParams from_bytes_wide = wide;
-  const PointForest<float> from_bytes(byte_rows.data(), n, dim), from_bytes_widened(byte_rows.data(), n, dim, from_bytes_wide);
+  const PointForest<float> from_bytes(byte_rows.data(), n, dim);
+  const PointForest<float> from_bytes_widened(byte_rows.data(), n, dim, wide);
   CHECK(from_bytes.compact());
   CHECK_FALSE(from_bytes_widened.compact());
   CHECK(from_bytes.memory_bytes() == bytes.memory_bytes());
@@ -364,13 +360,8 @@ TEST_CASE("forest: byte-valued points are kept as bytes, with the same answers b
   for (std::size_t checks : {std::size_t{16}, std::size_t{200}, kdspace::unlimited_checks}) {
     INFO("dim " << dim << ", from byte rows, checks " << checks);
     const auto want = bytes.knn_batch(queries.data(), nq, 10, {checks, 0}, 1);
-    for (const PointForest<float>* f : {&from_bytes, &from_bytes_widened}) {
-      const auto got = f->knn_batch(queries.data(), nq, 10, {checks, 0}, 2);
-      bool same = got.neighbors.size() == want.neighbors.size();
-      for (std::size_t i = 0; same && i < got.neighbors.size(); ++i)
-        same = got.neighbors[i].index == want.neighbors[i].index && got.neighbors[i].distance == want.neighbors[i].distance;
-      CHECK(same);
-    }
+    for (const PointForest<float>* f : {&from_bytes, &from_bytes_widened})
+      CHECK(f->knn_batch(queries.data(), nq, 10, {checks, 0}, 2).neighbors == want.neighbors);
   }
   // The exact answers for tuning come from the bytes as well.
   const auto exact = bytes.knn_exact_batch(queries.data(), nq, 10, 1);

@@ -35,8 +35,9 @@ bool stores_double(const std::string& path);
 /// or std::uint8_t (the only instantiations compiled into the library). Every row must have the same
 /// number of values, there must be at least one row, and every value must be finite (for float,
 /// within float range; for std::uint8_t, an integer from 0 to 255: .bvecs files at a quarter of the
-/// memory of float). Other element types of the file (.ivecs, .bvecs, .npy <i4 and |u1) are converted. on_progress, when set,
-/// is called now and then with the fraction of the file read so far (the last call passes 1).
+/// memory of float). Other element types of the file (.ivecs, .bvecs, .npy <i4 and |u1) are
+/// converted. on_progress, when set, is called now and then with the fraction of the file read so
+/// far (the last call passes 1).
 template <class T>
 Matrix<T> read_points(const std::string& path, const std::function<void(double)>& on_progress = {});
 

@@ -29,8 +29,9 @@
 //
 // Memory: a copy of the points (n * dim * sizeof(T), or n * dim bytes for byte-valued data), the
 // original index of each (4 bytes a point), and per tree the leaf order of the points (4 bytes a
-// point) and its nodes (16 bytes each, about 2n / leaf_size of them); plus the projection (dim * projected_dims doubles). memory_bytes() gives
-// the exact figure. The projected coordinates are only needed while building.
+// point) and its nodes (16 bytes each, about 2n / leaf_size of them); plus the projection
+// (dim * projected_dims doubles). memory_bytes() gives the exact figure. The projected coordinates
+// are only needed while building.
 #pragma once
 
 #include <cstddef>
