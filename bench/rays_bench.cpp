@@ -92,7 +92,7 @@
 #include <type_traits>
 #include <vector>
 
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/detail/slab.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 

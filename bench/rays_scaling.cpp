@@ -19,7 +19,7 @@
 #include <string>
 #include <vector>
 
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 
 using namespace kdspace;

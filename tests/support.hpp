@@ -18,7 +18,7 @@
 
 #include "kdspace/points/brute_force.hpp"
 #include "kdspace/points/point_tree.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 
 namespace kdspace_test {
 

@@ -1,4 +1,4 @@
-// Tests of ray shooting through BoxTree (kdspace/rays/box_tree.hpp) against brute force.
+// Tests of ray shooting through BoxTree (kdspace/boxes/box_tree.hpp) against brute force.
 //
 // The reference tests every box with the slab method in double precision, dividing by the direction
 // (the tree multiplies by its precomputed reciprocal), with the contract's rules: closed solid boxes,
@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "kdspace/error.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/brute_force.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 #include "support.hpp"

@@ -1,4 +1,4 @@
-// Tests of the BoxTree builds (kdspace/rays/box_tree.hpp): the O(N log N) SAH build makes exactly
+// Tests of the BoxTree builds (kdspace/boxes/box_tree.hpp): the O(N log N) SAH build makes exactly
 // the tree of the O(N log^2 N) one, builds do not depend on the thread count, statistics are
 // consistent, and hostile input (identical, flat, point-like, overlapping boxes) stays bounded.
 #include <algorithm>
@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 #include "support.hpp"
 

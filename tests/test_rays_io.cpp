@@ -14,7 +14,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/io/scene.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 #include "support.hpp"
 

@@ -9,6 +9,6 @@
 #include "kdspace/points/params.hpp"
 #include "kdspace/points/point_forest.hpp"
 #include "kdspace/points/point_tree.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/ray.hpp"
 #include "kdspace/version.hpp"

@@ -8,7 +8,7 @@
 #include "demo.hpp"
 #include "kdspace/io/scene.hpp"
 #include "kdspace/points/detail/parallel.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/brute_force.hpp"
 #include "kdspace/rays/render.hpp"
 #include "kdspace/rays/scene_gen.hpp"

@@ -12,7 +12,7 @@
 #include "kdspace/error.hpp"
 #include "kdspace/io/scene.hpp"
 #include "kdspace/points/detail/parallel.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/render.hpp"
 #include "options.hpp"
 #include "png_writer.hpp"

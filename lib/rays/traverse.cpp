@@ -24,7 +24,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/parallel.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/detail/slab.hpp"
 
 namespace kdspace {

@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 
 namespace kdspace {

@@ -12,7 +12,7 @@
 
 #include "build_common.hpp"
 #include "kdspace/box.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 
 namespace kdspace::detail {
 

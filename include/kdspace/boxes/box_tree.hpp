@@ -1,4 +1,5 @@
-// BoxTree: a kd-tree over axis-aligned 3-D boxes for ray shooting (closest hit, any hit).
+// BoxTree: a kd-tree over axis-aligned 3-D boxes, built once and shared by ray shooting (closest hit,
+// any hit; traversal in lib/rays/) and by the other queries that run on the same tree.
 //
 // Builds (one tree format for all):
 //   median     axis cycling with depth; plane at the spatial middle of the cell or at the median box;

@@ -14,7 +14,7 @@
 
 #include "kdspace/box.hpp"
 #include "kdspace/error.hpp"
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 
 namespace kdspace::detail {
 

@@ -1,5 +1,5 @@
 // BoxTree: input checks, the choice of build, and the statistics of the built tree.
-#include "kdspace/rays/box_tree.hpp"
+#include "kdspace/boxes/box_tree.hpp"
 
 #include <charconv>
 #include <chrono>
