@@ -60,7 +60,10 @@ class PointTree {
 
   /// Builds from n points of `dim` coordinates, row-major: point i is rows[i*dim .. i*dim + dim).
   /// Throws Error for n = 0, dim = 0 (or dim != Dim), non-finite coordinates, n >= 2^30.
-  PointTree(const T* rows, std::size_t n, std::size_t dim, const BuildParams& params = {}) : dim_(dim) {
+  /// `metric` matters only for a metric with state (Minkowski(p)).
+  PointTree(const T* rows, std::size_t n, std::size_t dim, const BuildParams& params = {},
+            const Metric& metric = {})
+      : dim_(dim), metric_(metric) {
     validate_build(rows, n, dim, params);
     build(rows, n, params);
   }
@@ -68,8 +71,8 @@ class PointTree {
   /// Builds from a matrix with one point per row: an Eigen matrix (either storage order) or anything
   /// with rows(), cols() and (i, j).
   template <class Matrix, class = std::enable_if_t<detail::is_matrix<Matrix>::value>>
-  explicit PointTree(const Matrix& points, const BuildParams& params = {})
-      : dim_(static_cast<std::size_t>(points.cols())) {
+  explicit PointTree(const Matrix& points, const BuildParams& params = {}, const Metric& metric = {})
+      : dim_(static_cast<std::size_t>(points.cols())), metric_(metric) {
     const std::size_t n = static_cast<std::size_t>(points.rows());
     std::vector<T> rows(n * dim_);
     for (std::size_t i = 0; i < n; ++i)
@@ -79,11 +82,38 @@ class PointTree {
     build(rows.data(), n, params);
   }
 
+  /// The same tree searched with another metric, or held in double, or with a run-time dimension:
+  /// the nodes, the leaf order and the points of `other`, copied (and widened exactly from float to
+  /// double where T is double and U float); nothing is built again, so the answers are those of a
+  /// tree built from the same points with the same parameters. The split positions do not depend on
+  /// the metric, so one build serves L2, L1, Linf and every Minkowski order. Dim must be Dynamic or
+  /// other's dimension.
+  template <class U, int OtherDim, class OtherMetric>
+  explicit PointTree(const PointTree<U, OtherDim, OtherMetric>& other, const Metric& metric = {})
+      : dim_(other.dim()), metric_(metric) {
+    static_assert(std::is_same_v<U, T> || (std::is_same_v<U, float> && std::is_same_v<T, double>),
+                  "a tree is copied into the same scalar type, or widened from float to double");
+    if (Dim != Dynamic && other.dim() != static_cast<std::size_t>(Dim))
+      throw Error("tree of dimension " + std::to_string(other.dim()) + " copied into a tree of dimension " +
+                  std::to_string(Dim));
+    points_.assign(other.points_.begin(), other.points_.end());
+    order_ = other.order_;
+    nodes_.reserve(other.nodes_.size());
+    for (const auto& node : other.nodes_)
+      nodes_.push_back(Node{static_cast<T>(node.left_max), static_cast<T>(node.right_min), node.link, node.info});
+    root_lo_.assign(other.root_lo_.begin(), other.root_lo_.end());
+    root_hi_.assign(other.root_hi_.begin(), other.root_hi_.end());
+    depth_ = other.depth_;
+    leaves_ = other.leaves_;
+    finish_build();
+  }
+
   std::size_t size() const { return order_.size(); }
   std::size_t dim() const {
     if constexpr (Dim == Dynamic) return dim_;
     else return static_cast<std::size_t>(Dim);
   }
+  const Metric& metric() const { return metric_; }
   std::size_t depth() const { return depth_; }
   std::size_t leaf_count() const { return leaves_; }
   std::size_t node_count() const { return nodes_.size(); }
@@ -119,7 +149,7 @@ class PointTree {
     check_query(q, "query");
     std::vector<detail::Candidate<T>> scratch;
     QueryStats local;
-    radius_into(q, Metric::to_internal(r), max_results, scratch, local);
+    radius_into(q, metric_.to_internal(r), max_results, scratch, local);
     return finish(scratch, stats, local);
   }
 
@@ -189,7 +219,7 @@ class PointTree {
                                 unsigned threads = 0, QueryStats* stats = nullptr) const {
     check_radius(r);
     check_queries(queries, nq);
-    const T limit = Metric::to_internal(r);
+    const T limit = metric_.to_internal(r);
     std::vector<std::vector<Neighbor<T>>> rows(nq);
     std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
     detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
@@ -209,8 +239,26 @@ class PointTree {
     return out;
   }
 
+  /// One query with the caller's result set, the one place that decides what a query keeps (as
+  /// detail::KnnResults and detail::RangeResults do for knn and radius). The traversal offers every
+  /// point it scores, as results.offer(internal distance, original index), and skips every cell whose
+  /// lower bound exceeds results.bound(); once results.full(), a check budget (params.max_checks) may
+  /// end it. Internal distances are the metric's (squared for L2): metric().to_internal(r) converts a
+  /// radius. In a leaf of identical points one distance is offered for each point in ascending index
+  /// order until offer() returns false, so offer() must refuse the rest once it refuses one there.
+  template <class Results>
+  void query_with(const T* q, Results& results, const SearchParams& params = {}, QueryStats* stats = nullptr) const {
+    check_search_params(params);
+    check_query(q, "query");
+    QueryStats local;
+    run(q, results, params, local);
+    if (stats) *stats += local;
+  }
+
   /// Nodes in depth-first order (read-only; for tools and tests).
   const std::vector<Node>& nodes() const { return nodes_; }
+  /// The original index of each point in leaf order: a leaf holds leaf_order()[first, first + count).
+  const std::vector<Index>& leaf_order() const { return order_; }
 
  private:
   // ---- validation ---------------------------------------------------------------------------------
@@ -248,6 +296,9 @@ class PointTree {
 
   // ---- build ------------------------------------------------------------------------------------
 
+  template <class, int, class>
+  friend class PointTree;  // the copying constructor reads another instantiation's arrays
+
   void build(const T* rows, std::size_t n, const BuildParams& params) {
     const std::size_t d = dim();
     root_lo_.assign(rows, rows + d);
@@ -264,13 +315,20 @@ class PointTree {
     nodes_ = std::move(built.nodes);
     points_ = std::move(built.points);
     order_ = std::move(built.order);
-    centre_.resize(d);
-    for (std::size_t a = 0; a < d; ++a) centre_[a] = root_lo_[a] / 2 + root_hi_[a] / 2;  // no overflow
     depth_ = built.depth;
     leaves_ = built.leaves;
     nodes_.shrink_to_fit();
+    finish_build();
+  }
+
+  // What follows from the nodes and the bounds: the scan's origin and the pruning margin.
+  void finish_build() {
+    const std::size_t d = dim();
+    centre_.resize(d);
+    for (std::size_t a = 0; a < d; ++a) centre_[a] = root_lo_[a] / 2 + root_hi_[a] / 2;  // no overflow
     // A cell's computed lower bound may exceed the exact one by rounding (a few ulps per axis and per
-    // level); pruning against bound * prune_margin_ keeps every cell that could hold a tie.
+    // level; std::pow in Minkowski's terms is within an ulp, like a product); pruning against
+    // bound * prune_margin_ keeps every cell that could hold a tie.
     prune_margin_ = T(1) - T(4) * T(d + 2 * depth_ + 8) * std::numeric_limits<T>::epsilon();
   }
 
@@ -300,11 +358,11 @@ class PointTree {
     T bound = 0;
     for (std::size_t a = 0; a < dim(); ++a) {
       const T diff = q[a] < root_lo_[a] ? root_lo_[a] - q[a] : (q[a] > root_hi_[a] ? q[a] - root_hi_[a] : T(0));
-      terms.data[a] = Metric::term(diff);
-      bound = Metric::accumulate(bound, terms.data[a]);
+      terms.data[a] = metric_.term(diff);
+      bound = metric_.accumulate(bound, terms.data[a]);
     }
     // (1 + eps) in internal units, worked out in double: a huge eps becomes infinity, never UB.
-    const double eps_scale_wide = Metric::to_internal(1.0 + params.eps);
+    const double eps_scale_wide = metric_.to_internal(1.0 + params.eps);
     const T eps_scale = eps_scale_wide > static_cast<double>(std::numeric_limits<T>::max())
                             ? std::numeric_limits<T>::infinity()
                             : static_cast<T>(eps_scale_wide);
@@ -336,8 +394,8 @@ class PointTree {
     search(near, bound, ctx, results);
 
     const T old_term = ctx.axis_terms[axis];
-    const T new_term = Metric::term(far_gap);
-    const T far_bound = Metric::replace(bound, old_term, new_term);
+    const T new_term = metric_.term(far_gap);
+    const T far_bound = metric_.replace(bound, old_term, new_term);
     if (far_bound * ctx.prune_scale > results.bound()) return;
     // The check budget ends the search only once k candidates are in hand.
     if (ctx.stats->points_visited >= ctx.checks_end && results.full()) return;
@@ -352,7 +410,7 @@ class PointTree {
     const T* p = points_.data() + first * dim();
     if (leaf.all_identical()) {
       // One distance serves all; the indices are ascending, so the first refusal ends the scan.
-      const T dist = internal_distance<Metric>(ctx.q, p, dim());
+      const T dist = internal_distance(metric_, ctx.q, p, dim());
       ++ctx.stats->points_visited;
       for (std::size_t i = 0; i < count; ++i)
         if (!results.offer(dist, order_[first + i])) break;
@@ -360,7 +418,7 @@ class PointTree {
     }
     ctx.stats->points_visited += count;
     for (std::size_t i = 0; i < count; ++i, p += dim())
-      results.offer(internal_distance<Metric>(ctx.q, p, dim()), order_[first + i]);
+      results.offer(internal_distance(metric_, ctx.q, p, dim()), order_[first + i]);
   }
 
   void radius_into(const T* q, T limit, std::size_t max_results, std::vector<detail::Candidate<T>>& out,
@@ -396,7 +454,7 @@ class PointTree {
           detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
           const T* p = points_.data();
           for (std::size_t i = 0; i < size(); ++i, p += d)
-            results.offer(internal_distance<Metric>(queries + q * d, p, d), order_[i]);
+            results.offer(internal_distance(metric_, queries + q * d, p, d), order_[i]);
           write(results.sorted(), out + q * k);
         }
       }
@@ -434,8 +492,8 @@ class PointTree {
   }
 
   // Converts to true distances, keeping the order of the internal ones (see the top of this file).
-  static void write(const std::vector<detail::Candidate<T>>& sorted, Neighbor<T>* out) {
-    for (const auto& c : sorted) *out++ = Neighbor<T>{c.index, Metric::to_distance(c.dist)};
+  void write(const std::vector<detail::Candidate<T>>& sorted, Neighbor<T>* out) const {
+    for (const auto& c : sorted) *out++ = Neighbor<T>{c.index, metric_.to_distance(c.dist)};
   }
 
   static void sum_stats(const std::vector<QueryStats>& per_worker, QueryStats* stats) {
@@ -447,6 +505,7 @@ class PointTree {
   static constexpr std::size_t probe_queries = 16;
 
   std::size_t dim_;
+  Metric metric_;
   std::vector<T> points_;             // leaf-ordered copy, row-major
   std::vector<std::uint32_t> order_;  // original index of each leaf-ordered point
   std::vector<Node> nodes_;           // depth first; nodes_[0] is the root
@@ -471,6 +530,7 @@ namespace kdspace {
   PREFIX class PointTree<float, 2, L2>;        \
   PREFIX class PointTree<float, 3, L2>;        \
   PREFIX class PointTree<double, 2, L2>;       \
-  PREFIX class PointTree<double, 3, L2>;
+  PREFIX class PointTree<double, 3, L2>;        \
+  PREFIX class PointTree<double, Dynamic, Minkowski>;
 KDSPACE_POINT_TREE_INSTANCES(extern template)
 }  // namespace kdspace
