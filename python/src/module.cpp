@@ -19,4 +19,7 @@ PYBIND11_MODULE(_core, m) {
   });
   kdspace::python::bind_points_float(m);
   kdspace::python::bind_points_double(m);
+  kdspace::python::bind_forest(m);
+  kdspace::python::bind_boxes(m);
+  kdspace::python::bind_io(m);
 }

@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <string>
 #include <type_traits>
 #include <vector>
 
@@ -272,12 +273,14 @@ class TreeSearcher final : public Searcher<T> {
     return std::make_shared<TreeSearcher<Copy, T>>(Copy(tree_, metric), map_);
   }
 
-  // Calls body(query as S, query number, scratch[, worker]) for each query, on `threads` threads.
-  // A periodic query arrives wrapped into the box.
+  // Calls body(query as S, query number, scratch[, worker]) for each query, on `threads` threads,
+  // taking the queries in leaf order (see leaf_order_of). A periodic query arrives wrapped into the
+  // box.
   template <class Body>
   void for_queries(const T* queries, std::size_t nq, unsigned threads, Body&& body,
                    const PeriodicBox<double>* box) const {
     const std::size_t d = tree_.dim();
+    const std::vector<std::uint32_t> order = leaf_order_of(queries, nq);
     detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
       Scratch scratch;
       scratch.query.resize(d);
@@ -288,7 +291,8 @@ class TreeSearcher final : public Searcher<T> {
         scratch.box->hi.assign(box->hi.begin(), box->hi.end());
         scratch.wrapped.resize(d);
       }
-      for (std::size_t i = begin; i < end; ++i) {
+      for (std::size_t position = begin; position < end; ++position) {
+        const std::size_t i = order[position];
         const S* q = as_scalar(queries + i * d, scratch.query);
         if (box) {
           wrap_into(*scratch.box, q, scratch.wrapped.data(), d);
@@ -313,27 +317,28 @@ class TreeSearcher final : public Searcher<T> {
   }
 
   // Plain k-NN batches through the tree's knn_batch (which may answer high-dimensional batches by
-  // its blocked scan), in blocks so that its result lists stay small. `found` <= k columns come from
-  // the tree; the rest of each row of k is missing.
+  // its blocked scan), in blocks so that its result lists stay small, and in the order of the leaves
+  // the queries fall in (leaf_order_of): consecutive queries then mostly read the same nodes and
+  // points, still in cache. `found` <= k columns come from the tree; the rest of each row is missing.
   void batch_knn(const T* queries, std::size_t nq, std::size_t found, std::size_t k,
                  const SearchParams& params, unsigned threads, T* dist, RowId* rows) const {
     constexpr std::size_t block = 1 << 16;
     const std::size_t d = tree_.dim();
-    std::vector<S> widened;
+    const std::vector<std::uint32_t> order = leaf_order_of(queries, nq);
+    std::vector<S> gathered;
     for (std::size_t first = 0; first < nq; first += block) {
       const std::size_t count = std::min(block, nq - first);
-      const S* block_queries;
-      if constexpr (std::is_same_v<S, T>) {
-        block_queries = queries + first * d;
-      } else {
-        widened.assign(queries + first * d, queries + (first + count) * d);
-        block_queries = widened.data();
+      gathered.resize(count * d);
+      for (std::size_t q = 0; q < count; ++q) {
+        const T* from = queries + std::size_t{order[first + q]} * d;
+        std::copy(from, from + d, gathered.begin() + static_cast<std::ptrdiff_t>(q * d));
       }
       NeighborLists<S> lists;
-      if (found > 0) lists = tree_.knn_batch(block_queries, count, found, params, threads);
+      if (found > 0) lists = tree_.knn_batch(gathered.data(), count, found, params, threads);
       for (std::size_t q = 0; q < count; ++q) {
-        T* dist_row = dist + (first + q) * k;
-        RowId* row = rows + (first + q) * k;
+        const std::size_t out = order[first + q];
+        T* dist_row = dist + out * k;
+        RowId* row = rows + out * k;
         for (std::size_t i = 0; i < k; ++i) {
           // A distance that overflowed to +inf is never a neighbour (SciPy: inf < inf is false).
           const Neighbor<S>* nb = i < found ? &lists.neighbors[q * found + i] : nullptr;
@@ -343,6 +348,32 @@ class TreeSearcher final : public Searcher<T> {
         }
       }
     }
+  }
+
+  // The queries' numbers sorted by the leaf each one's descent reaches first (the nearer child at
+  // every node, as the search goes): a counting sort on the leaf's node number, depth-first, so
+  // queries in neighbouring cells follow each other.
+  std::vector<std::uint32_t> leaf_order_of(const T* queries, std::size_t nq) const {
+    if (nq > std::numeric_limits<std::uint32_t>::max())
+      throw Error("too many queries in one call: " + std::to_string(nq) + " (at most 2^32 - 1)");
+    std::vector<std::uint32_t> order(nq);
+    const auto& nodes = tree_.nodes();
+    const std::size_t d = tree_.dim();
+    std::vector<std::uint32_t> leaf(nq), starts(nodes.size() + 1, 0);
+    for (std::size_t q = 0; q < nq; ++q) {
+      const T* x = queries + q * d;
+      std::uint32_t id = 0;
+      while (!nodes[id].is_leaf()) {
+        const auto& node = nodes[id];
+        const S v = static_cast<S>(x[node.axis()]);
+        id = v - node.left_max <= node.right_min - v ? id + 1 : node.right_child();
+      }
+      leaf[q] = id;
+      ++starts[id + 1];
+    }
+    for (std::size_t i = 1; i < starts.size(); ++i) starts[i] += starts[i - 1];
+    for (std::size_t q = 0; q < nq; ++q) order[starts[leaf[q]]++] = static_cast<std::uint32_t>(q);
+    return order;
   }
 
   // The k nearest of a wrapped query on the periodic box, into scratch.candidates (sorted).
