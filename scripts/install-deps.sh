@@ -11,6 +11,9 @@ packages=(
   libflann-dev liblz4-dev                                    # FLANN: validation tests and benchmarks
   libnanoflann-dev libembree-dev                             # benchmark peers
   gnuplot-nox                                                # benchmark plots
+  pybind11-dev python3-dev python3-numpy                     # the Python module (python/)
+  python3-scipy python3-pytest                               # its tests (SciPy's kd-tree tests run against it)
+  python3-pykdtree python3-opencv                            # its benchmark peer; the photo-matching example
 )
 
 missing=()

@@ -31,3 +31,19 @@ c++ $san "$here/consumer/consumer.cpp" -o "$scratch/consumer-pkgconfig" \
   $(PKG_CONFIG_PATH="$pcdir" pkg-config --cflags --libs kdspace)
 "$scratch/consumer-pkgconfig"
 echo "install check: CMake package and pkg-config both work"
+
+# The Python module, when the build made it: installed under the prefix, imported from there (and
+# from a folder away from the sources) by the interpreter the build was made for.
+if [ -d "$build_dir/python/kdspace" ]; then
+  python=$(grep -E '^Python3_EXECUTABLE:' "$build_dir/CMakeCache.txt" | cut -d= -f2-)
+  module=$(find "$prefix" -name '_core*.so' -path '*/kdspace/*' | head -n 1)
+  test -n "$module" || { echo "install check: the Python module was not installed" >&2; exit 1; }
+  site=$(dirname "$(dirname "$module")")
+  (cd "$scratch" && PYTHONPATH="$site" "$python" -c '
+import kdspace, numpy as np
+assert kdspace.__file__.startswith("'"$site"'"), kdspace.__file__
+tree = kdspace.KDTree(np.eye(3))
+d, i = tree.query([0.9, 0.1, 0.0])
+assert i == 0, (d, i)
+print("install check: Python module imported from", kdspace.__file__)')
+fi
