@@ -55,9 +55,9 @@ std::string describe(Shape shape, std::size_t dim, double p, const BuildParams& 
 /// kernel, bit for bit, on every shape of data.
 template <class T>
 void minkowski_matches_brute_force(double p) {
-  const std::size_t n = 300, nq = 24;
+  const std::size_t n = 200, nq = 12;
   for (Shape shape : all_shapes)
-    for (std::size_t dim : {1, 2, 3, 5, 9}) {
+    for (std::size_t dim : {1, 3, 9}) {
       const auto pts = kdspace_test::make_points<T>(shape, n, dim, 17);
       const auto queries = kdspace_test::make_queries<T>(pts, n, dim, nq, 18);
       const Minkowski metric(p);
