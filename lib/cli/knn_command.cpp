@@ -1,6 +1,6 @@
 // `kdspace knn` and `kdspace radius`: read a base and a query file, build a PointTree, search, write
 // the ids (and distances) of the results. Both commands share one implementation; they differ only
-// in their options and in the batch query they run.
+// in their options (search_job.hpp, shared with kdspace-mpi) and in the batch query they run.
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -21,173 +21,15 @@
 #include "kdspace/points/point_tree.hpp"
 #include "options.hpp"
 #include "progress.hpp"
+#include "search_job.hpp"
 
 namespace kdspace::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
-enum class Mode { knn, radius };
-
-const char* const knn_usage =
-    R"(usage: kdspace knn --base FILE --query FILE -k K --out IDS.ivecs [--distances D.fvecs]
-                   [build options] [--eps E | --forest T [--checks C] | --recall R [--forest T]]
-                   [--threads T] [--stats]
-Finds the K nearest base points of every query point.
-
-  -k K                 a whole number >= 1; -k 0 is a usage error (exit 2), K above the number of
-                       base points an error (exit 1), never silently shortened
-  --eps E              approximate, on the exact tree: the i-th result within (1+E) of the true
-                       i-th (default 0: exact)
-  --forest T           approximate, for high dimensions: T randomized kd-trees (1..1024) searched
-                       together, best bin first, l2 only; the distances returned are exact;
-                       byte-valued points (a .bvecs base) are kept as bytes, a quarter of the memory
-  --checks C           with --forest: points scored per query (default 256); more is slower and
-                       finds more of the true neighbours
-  --recall R           tune the forest (T trees, default 8) for a mean recall@K of R (0 < R <= 1)
-                       on a sample of the queries (up to 200 choose the setting, 200 others check
-                       it), then search all queries with the setting found
-                       With --forest or --recall, --stats adds trees, checks, and the recall
-                       measured on up to 200 of the queries against exact answers.
-)";
-
-const char* const radius_usage =
-    R"(usage: kdspace radius --base FILE --query FILE -r R --out IDS.ivecs [--distances D.fvecs]
-                      [--max-results M] [build options] [--threads T] [--stats]
-Finds every base point within distance R of each query point (closed ball).
-
-  -r R                 a finite number >= 0 in the data's units (not squared); negative or NaN is a
-                       usage error (exit 2); the rows of IDS differ in length
-  --max-results M      keep only the M nearest within R (M >= 1)
-)";
-
-const char* const shared_usage = R"(  --base FILE          the points searched
-  --query FILE         the query points, of the same dimension
-                       Files: .fvecs .ivecs .bvecs .csv (optional header line) .npy, chosen by extension.
-                       A .csv or float64 .npy base is searched in double precision, any other in float.
-  --out IDS.ivecs      one row per query: 0-based indices of base points, nearest first, equal
-                       distances by smaller index
-  --distances D.fvecs  the true distances of those points (Euclidean for l2, not squared)
-  --threads T          threads for the build and the queries; 0 (default) = all hardware threads
-  --stats              one JSON object on stdout: build_s, query_s, queries_per_s, threads, depth,
-                       leaves, nodes_visited_per_query, points_visited_per_query, points, dim,
-                       queries, k or radius, metric, index_bytes (times without file I/O)
-build options:
-  --axis cycle|spread               split axis (default spread: the axis of largest spread)
-  --position median|middle|sliding  split position (default median)
-  --leaf N                          at most N points a leaf (default 16)
-  --max-depth D                     0..256 (default 64)
-  --metric l2|l1|linf               (default l2)
-Exit codes: 0 success, 2 usage error, 1 bad data or I/O error.
-)";
-
-struct SearchJob {
-  Mode mode = Mode::knn;
-  std::string base, query, out, distances;
-  BuildParams build;
-  std::string metric = "l2";
-  std::size_t k = 0;
-  double radius = 0;
-  std::size_t max_results = std::numeric_limits<std::size_t>::max();
-  double eps = 0;
-  std::size_t forest_trees = 0;  // 0: the exact tree
-  std::size_t checks = 256;
-  double recall = 0;             // 0: no tuning
-  unsigned threads = 0;
-  bool stats = false;
-};
-
-std::vector<OptionSpec> option_specs(Mode mode) {
-  std::vector<OptionSpec> specs = {{"--base"},   {"--query"},    {"--out"},         {"--distances"},
-                                   {"--axis"},   {"--position"}, {"--leaf"},        {"--max-depth"},
-                                   {"--metric"}, {"--threads"},  {"--stats", false}};
-  if (mode == Mode::knn) {
-    specs.push_back({"-k"});
-    specs.push_back({"--eps"});
-    specs.push_back({"--forest"});
-    specs.push_back({"--checks"});
-    specs.push_back({"--recall"});
-  } else {
-    specs.push_back({"-r"});
-    specs.push_back({"--max-results"});
-  }
-  return specs;
-}
-
-// --forest, --checks, --recall: which approximate search, and the rules that keep them apart.
-void parse_forest_options(const Options& o, SearchJob& job) {
-  const bool forest = o.has("--forest"), tune = o.has("--recall");
-  if (!forest && !tune) {
-    if (o.has("--checks")) throw UsageError("--checks needs --forest");
-    return;
-  }
-  if (o.has("--eps")) throw UsageError("--eps applies to the exact tree; it cannot be combined with --forest or --recall");
-  job.forest_trees = o.count("--forest", 8, 1, 1024);
-  if (tune) {
-    if (o.has("--checks")) throw UsageError("--checks and --recall exclude each other: --recall chooses the checks");
-    job.recall = o.number("--recall", 0.0, 0.0, 1.0);
-    if (!(job.recall > 0)) throw UsageError("--recall must be in (0, 1], got " + o.text("--recall"));
-  } else {
-    job.checks = o.count("--checks", 256, 1, std::numeric_limits<std::size_t>::max());
-  }
-}
-
-SearchJob parse_job(Mode mode, const std::vector<std::string>& args) {
-  const Options o(args, option_specs(mode));
-  constexpr std::size_t no_limit = std::numeric_limits<std::size_t>::max();
-  SearchJob job;
-  job.mode = mode;
-  job.base = o.required("--base");
-  job.query = o.required("--query");
-  if (mode == Mode::knn) {
-    if (!o.has("-k")) throw UsageError("missing option -k");
-    job.k = o.count("-k", 0, 1, no_limit);
-    job.eps = o.number("--eps", 0.0, 0.0, std::numeric_limits<double>::infinity());
-    parse_forest_options(o, job);
-  } else {
-    if (!o.has("-r")) throw UsageError("missing option -r");
-    job.radius = o.number("-r", 0.0, 0.0, std::numeric_limits<double>::infinity());
-    job.max_results = o.count("--max-results", no_limit, 1, no_limit);
-  }
-  job.out = o.required("--out");
-  require_extension("--out", job.out, ".ivecs");
-  job.distances = o.text("--distances");
-  if (!job.distances.empty()) require_extension("--distances", job.distances, ".fvecs");
-
-  const BuildParams defaults;
-  job.build.axis =
-      o.choice("--axis", "spread", {"cycle", "spread"}) == "cycle" ? AxisRule::cycle : AxisRule::max_spread;
-  const std::string position = o.choice("--position", "median", {"median", "middle", "sliding"});
-  job.build.position = position == "middle"    ? PositionRule::middle
-                       : position == "sliding" ? PositionRule::sliding_midpoint
-                                               : PositionRule::median;
-  job.build.leaf_size = o.count("--leaf", defaults.leaf_size, 1, no_limit);
-  job.build.max_depth = o.count("--max-depth", defaults.max_depth, 0, 256);
-  job.metric = o.choice("--metric", "l2", {"l2", "l1", "linf"});
-  if (job.forest_trees > 0) {
-    if (job.metric != "l2") throw UsageError("--forest and --recall search with --metric l2 only");
-    for (const char* exact_only : {"--axis", "--position", "--max-depth"})
-      if (o.has(exact_only))
-        throw UsageError(std::string(exact_only) + " applies to the exact tree, not to --forest or --recall");
-    job.build.leaf_size = o.count("--leaf", ForestParams{}.leaf_size, 1, no_limit);
-  }
-  job.threads = static_cast<unsigned>(o.count("--threads", 0, 0, 4096));
-  job.build.threads = job.threads;
-  job.stats = o.has("--stats");
-  return job;
-}
-
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-// A non-negative value as T; beyond float's range it becomes infinity (a plain cast would be
-// undefined behaviour). Used for distances written to .fvecs and for the radius of a float tree.
-template <class T, class From>
-T narrow(From v) {
-  if (sizeof(T) < sizeof(From) && v > static_cast<From>(std::numeric_limits<T>::max()))
-    return std::numeric_limits<T>::infinity();
-  return static_cast<T>(v);
 }
 
 template <class T>
@@ -256,21 +98,6 @@ NeighborLists<T> search(const PointTree<T, Dynamic, Metric>& tree, const io::Mat
   } catch (const Error& e) {
     throw in_query_file(e, job);
   }
-}
-
-template <class T>
-void write_results(const NeighborLists<T>& found, const SearchJob& job) {
-  io::RaggedRows<std::int32_t> ids;
-  ids.offsets = found.offsets;
-  ids.values.reserve(found.neighbors.size());
-  for (const Neighbor<T>& nb : found.neighbors) ids.values.push_back(static_cast<std::int32_t>(nb.index));
-  io::write_ivecs(job.out, ids);
-  if (job.distances.empty()) return;
-  io::RaggedRows<float> dists;
-  dists.offsets = found.offsets;
-  dists.values.reserve(found.neighbors.size());
-  for (const Neighbor<T>& nb : found.neighbors) dists.values.push_back(narrow<float>(nb.distance));
-  io::write_fvecs(job.distances, dists);
 }
 
 template <class T, class Metric>
@@ -460,8 +287,7 @@ int run_search_command(Mode mode, const std::vector<std::string>& args) {
   const char* name = mode == Mode::knn ? "knn" : "radius";
   return run_guarded(name, [&] {
     if (wants_help(args)) {
-      std::fputs(mode == Mode::knn ? knn_usage : radius_usage, stdout);
-      std::fputs(shared_usage, stdout);
+      std::fputs(search_usage(mode).c_str(), stdout);
       return 0;
     }
     const SearchJob job = parse_job(mode, args);
