@@ -16,6 +16,9 @@
 #include <string_view>
 #include <system_error>
 #include <type_traits>
+#include <utility>
+
+#include <sys/types.h>
 
 #include "kdspace/error.hpp"
 
@@ -190,6 +193,13 @@ class InFile {
     offset_ = 0;
   }
 
+  // Moves to byte `offset` of the file (at most its size).
+  void seek(std::uint64_t offset) {
+    if (offset > size_ || fseeko(f_.get(), static_cast<off_t>(offset), SEEK_SET) != 0)
+      fail(path_, "cannot seek to byte " + std::to_string(offset) + ": " + std::strerror(errno));
+    offset_ = offset;
+  }
+
  private:
   void advance(std::size_t n) {
     offset_ += n;
@@ -247,9 +257,9 @@ void check_vecs_dimension(std::int32_t d, std::size_t cols, const RowRef& at) {
 }
 
 // Reads m.rows rows of m.cols elements of type e (each after an int32 length when `vecs`) into m,
-// which is already sized; a block of rows at a time.
+// which is already sized; a block of rows at a time. The first is the file's row first_row + 1.
 template <class T>
-void read_binary_rows(InFile& in, Elem e, bool vecs, Matrix<T>& m) {
+void read_binary_rows(InFile& in, Elem e, bool vecs, Matrix<T>& m, std::size_t first_row = 0) {
   const std::size_t eb = elem_bytes(e);
   const std::size_t row_bytes = (vecs ? 4 : 0) + m.cols * eb;
   const std::size_t block_rows = std::max<std::size_t>(1, in.chunk_bytes() / row_bytes);
@@ -257,9 +267,9 @@ void read_binary_rows(InFile& in, Elem e, bool vecs, Matrix<T>& m) {
   for (std::size_t r0 = 0; r0 < m.rows; r0 += block_rows) {
     const std::size_t n = std::min(block_rows, m.rows - r0);
     block.resize(n * row_bytes);
-    in.read_exact(block.data(), block.size(), RowRef{in.path(), r0 + 1});
+    in.read_exact(block.data(), block.size(), RowRef{in.path(), first_row + r0 + 1});
     for (std::size_t i = 0; i < n; ++i) {
-      const RowRef at{in.path(), r0 + i + 1};
+      const RowRef at{in.path(), first_row + r0 + i + 1};
       const unsigned char* p = block.data() + i * row_bytes;
       if (vecs) {
         check_vecs_dimension(load_as<std::int32_t>(p), m.cols, at);
@@ -522,6 +532,33 @@ std::string quote(std::string_view field) {
   return "'" + std::string(field.substr(0, 40)) + (field.size() > 40 ? "...'" : "'");
 }
 
+bool is_blank_line(const std::string& line) { return std::all_of(line.begin(), line.end(), is_blank); }
+
+// Line 1 is a header when none of its fields is a number; a mix is a data row with a bad field.
+bool is_header_line(const std::vector<std::string_view>& fields, std::string& scratch) {
+  double v = 0;
+  return std::none_of(fields.begin(), fields.end(), [&](std::string_view f) { return parse_number(f, scratch, v); });
+}
+
+// Appends the fields of one data row to m (m.cols set from the first row when still 0).
+template <class T>
+void append_csv_row(const std::vector<std::string_view>& fields, std::string& scratch, const RowRef& at,
+                    Matrix<T>& m) {
+  if (m.cols == 0) m.cols = fields.size();
+  if (fields.size() != m.cols)
+    at.fail("has " + std::to_string(fields.size()) + " values, expected " + std::to_string(m.cols) + " like row 1");
+  double v = 0;
+  for (std::size_t c = 0; c < fields.size(); ++c) {
+    if (!parse_number(fields[c], scratch, v)) at.fail(column(c) + quote(fields[c]) + " is not a number");
+    m.data.push_back(checked_value<T>(v, at, c));
+  }
+  ++m.rows;
+}
+
+void check_row_count(const std::string& path, std::uint64_t rows, bool header) {
+  if (rows == 0) fail(path, header ? "no rows after the header line" : "empty file, no rows");
+}
+
 template <class T>
 Matrix<T> read_csv_points(InFile& in) {
   const std::string& path = in.path();
@@ -531,32 +568,183 @@ Matrix<T> read_csv_points(InFile& in) {
   std::vector<std::string_view> fields;
   std::size_t line_no = 0, blank_line = 0;
   bool header = false;
-  double v = 0;
   while (lines.next(line)) {
     ++line_no;
-    if (std::all_of(line.begin(), line.end(), is_blank)) {  // allowed at the end only
+    if (is_blank_line(line)) {  // allowed at the end only
       if (!blank_line) blank_line = line_no;
       continue;
     }
     if (blank_line) RowRef{path, m.rows + 1, blank_line}.fail("blank line (allowed only at the end of the file)");
     split_fields(line, fields);
-    // Line 1 is a header when none of its fields is a number; a mix is a data row with a bad field.
-    if (line_no == 1 && std::none_of(fields.begin(), fields.end(),
-                                     [&](std::string_view f) { return parse_number(f, scratch, v); })) {
+    if (line_no == 1 && is_header_line(fields, scratch)) {
       header = true;
       continue;
     }
-    const RowRef at{path, m.rows + 1, line_no};
-    if (m.rows == 0) m.cols = fields.size();
-    if (fields.size() != m.cols)
-      at.fail("has " + std::to_string(fields.size()) + " values, expected " + std::to_string(m.cols) + " like row 1");
-    for (std::size_t c = 0; c < fields.size(); ++c) {
-      if (!parse_number(fields[c], scratch, v)) at.fail(column(c) + quote(fields[c]) + " is not a number");
-      m.data.push_back(checked_value<T>(v, at, c));
-    }
-    ++m.rows;
+    append_csv_row(fields, scratch, RowRef{path, m.rows + 1, line_no}, m);
   }
-  if (m.rows == 0) fail(path, header ? "no rows after the header line" : "empty file, no rows");
+  check_row_count(path, m.rows, header);
+  return m;
+}
+
+// ---- parts of a file (kdspace-mpi) ---------------------------------------------------------------
+
+// Part `part` of `parts` equal shares of `total` items: [begin, end), sizes differing by one at most.
+std::pair<std::uint64_t, std::uint64_t> share(std::uint64_t total, std::size_t part, std::size_t parts) {
+  const std::uint64_t each = total / parts, extra = total % parts;
+  auto start = [&](std::uint64_t p) { return p * each + std::min<std::uint64_t>(p, extra); };
+  return {start(part), start(part + 1)};
+}
+
+// The first byte at or after `offset` that starts a line (0, or just after a newline); the file size
+// when there is none.
+std::uint64_t line_start_from(InFile& in, std::uint64_t offset) {
+  if (offset == 0 || offset >= in.size()) return std::min(offset, in.size());
+  in.seek(offset - 1);
+  std::vector<char> buf(in.chunk_bytes());
+  std::uint64_t at = offset - 1;
+  while (const std::size_t got = in.read_some(buf.data(), buf.size())) {
+    if (const void* nl = std::memchr(buf.data(), '\n', got))
+      return at + static_cast<std::uint64_t>(static_cast<const char*>(nl) - buf.data()) + 1;
+    at += got;
+  }
+  return in.size();
+}
+
+// Lines of [plan.begin, end): how many, and the last that holds data (the header line does not).
+void scan_csv_lines(InFile& in, std::uint64_t end, PartPlan& plan) {
+  in.seek(plan.begin);
+  std::vector<char> buf(in.chunk_bytes());
+  std::uint64_t left = end - plan.begin;
+  std::uint64_t other = 0;  // bytes of the current line other than spaces and tabs
+  char last = '\n';         // the line's last byte so far
+  bool open = false;        // a line has started and not ended
+  auto end_line = [&] {
+    // Blank: only spaces and tabs, but for a final '\r' (the reader drops it).
+    const bool blank = other == 0 || (other == 1 && last == '\r');
+    const bool header = plan.header && plan.begin == 0 && plan.units == 0;
+    if (!blank && !header) plan.last_data_line = plan.units;
+    ++plan.units;
+    other = 0;
+    open = false;
+  };
+  while (left > 0) {
+    const std::size_t want = static_cast<std::size_t>(std::min<std::uint64_t>(left, buf.size()));
+    const std::size_t got = in.read_some(buf.data(), want);
+    if (got == 0) fail(in.path(), "the file shrank while being read");
+    left -= got;
+    for (std::size_t i = 0; i < got; ++i) {
+      const char ch = buf[i];
+      if (ch == '\n') {
+        end_line();
+        continue;
+      }
+      open = true;
+      if (!is_blank(ch)) ++other;
+      last = ch;
+    }
+  }
+  if (open) end_line();  // the file's last line, without a newline
+}
+
+PartPlan plan_csv_part(InFile& in, std::size_t part, std::size_t parts) {
+  PartPlan plan;
+  plan.path = in.path();
+  plan.format = Format::csv;
+  // Line 1 (and 2, after a header) tell every part whether there is a header and how wide rows are.
+  {
+    LineReader lines(in);
+    std::string line, scratch;
+    std::vector<std::string_view> fields;
+    if (lines.next(line) && !is_blank_line(line)) {
+      split_fields(line, fields);
+      plan.header = is_header_line(fields, scratch);
+      if (plan.header && lines.next(line) && !is_blank_line(line)) split_fields(line, fields);
+      if (!plan.header || !is_blank_line(line)) plan.cols = fields.size();
+    }
+  }
+  const auto [first_byte, end_byte] = share(in.size(), part, parts);
+  plan.begin = line_start_from(in, first_byte);
+  const std::uint64_t end = std::max(plan.begin, line_start_from(in, end_byte));
+  scan_csv_lines(in, end, plan);
+  return plan;
+}
+
+template <class T>
+Matrix<T> read_csv_part(const PartPlan& plan, std::uint64_t first_line, std::uint64_t data_end) {
+  InFile in(plan.path);
+  in.seek(plan.begin);
+  LineReader lines(in);
+  Matrix<T> m;
+  m.cols = plan.cols;
+  std::string line, scratch;
+  std::vector<std::string_view> fields;
+  const std::uint64_t header_lines = plan.header ? 1 : 0;
+  for (std::uint64_t j = 0; j < plan.units; ++j) {
+    if (!lines.next(line)) fail(plan.path, "the file changed while being read");
+    const std::uint64_t index = first_line + j;  // 0-based line of the file
+    if (index < header_lines) continue;
+    // With no blank line before (it would have been reported first), the rows before are the lines.
+    const RowRef at{plan.path, static_cast<std::size_t>(index - header_lines + 1), static_cast<std::size_t>(index + 1)};
+    if (is_blank_line(line)) {
+      if (index < data_end) at.fail("blank line (allowed only at the end of the file)");
+      continue;
+    }
+    split_fields(line, fields);
+    append_csv_row(fields, scratch, at, m);
+  }
+  return m;
+}
+
+PartPlan plan_binary_part(InFile& in, Format format, std::size_t part, std::size_t parts) {
+  PartPlan plan;
+  plan.path = in.path();
+  plan.format = format;
+  std::uint64_t total_rows = 0, data_offset = 0;
+  if (format == Format::npy) {
+    const NpyHeader h = read_npy_header(in);
+    if (h.rows == 0) fail(in.path(), "no rows (shape " + h.shape + ")");
+    plan.cols = h.cols;
+    plan.row_bytes = h.cols * elem_bytes(h.elem);
+    data_offset = in.size() - h.rows * plan.row_bytes;
+    total_rows = h.rows;
+  } else {
+    std::int32_t d = 0;
+    in.read_exact(&d, 4, RowRef{in.path(), 1});
+    check_vecs_dimension(d, 0, RowRef{in.path(), 1});
+    plan.cols = static_cast<std::size_t>(d);
+    plan.row_bytes = 4 + plan.cols * elem_bytes(vecs_elem(format));
+    total_rows = in.size() / plan.row_bytes;
+    plan.last_part = part + 1 == parts;  // it also checks what follows the last whole row
+  }
+  const auto [first, end] = share(total_rows, part, parts);
+  plan.first_row = first;
+  plan.units = end - first;
+  plan.begin = data_offset + first * plan.row_bytes;
+  return plan;
+}
+
+template <class T>
+Matrix<T> read_binary_part(const PartPlan& plan) {
+  InFile in(plan.path);
+  Elem e = vecs_elem(plan.format);
+  if (plan.format == Format::npy) e = read_npy_header(in).elem;
+  Matrix<T> m;
+  m.rows = static_cast<std::size_t>(plan.units);
+  m.cols = plan.cols;
+  m.data.resize(m.rows * m.cols);
+  in.seek(plan.begin);
+  const bool vecs = plan.format != Format::npy;
+  read_binary_rows(in, e, vecs, m, static_cast<std::size_t>(plan.first_row));
+  if (vecs && plan.last_part && in.left() > 0) {  // a partial row at the end: wrong length, or cut off
+    const RowRef at{in.path(), static_cast<std::size_t>(plan.first_row + m.rows + 1)};
+    const std::uint64_t got = in.left();
+    if (got >= 4) {
+      std::int32_t d = 0;
+      in.read_exact(&d, 4, at);
+      check_vecs_dimension(d, m.cols, at);
+    }
+    at.fail(truncated(plan.row_bytes, got));
+  }
   return m;
 }
 
@@ -580,19 +768,44 @@ RaggedRows<T> read_ragged(const std::string& path) {
   return out;
 }
 
-// Writes an int32 row length; says so when it does not fit.
-void write_length(OutFile& out, std::size_t n, std::size_t row) {
+// The int32 length at the start of a vecs row; says so when it does not fit.
+std::int32_t row_length(const std::string& path, std::size_t n, std::size_t row) {
   if (n > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))
-    RowRef{out.path(), row}.fail(std::to_string(n) + " values do not fit in a vecs row");
-  const auto d = static_cast<std::int32_t>(n);
+    RowRef{path, row}.fail(std::to_string(n) + " values do not fit in a vecs row");
+  return static_cast<std::int32_t>(n);
+}
+
+void write_length(OutFile& out, std::size_t n, std::size_t row) {
+  const std::int32_t d = row_length(out.path(), n, row);
   out.write(&d, 4);
 }
 
 template <class T>
-void write_ragged(const std::string& path, const RaggedRows<T>& rows) {
+void check_ragged(const std::string& path, const RaggedRows<T>& rows) {
   const auto& o = rows.offsets;
   if (o.empty() || o.front() != 0 || o.back() != rows.values.size() || !std::is_sorted(o.begin(), o.end()))
     fail(path, "ragged rows are inconsistent: offsets must rise from 0 to the number of values");
+}
+
+template <class T>
+std::vector<unsigned char> ragged_bytes(const std::string& path, const RaggedRows<T>& rows) {
+  check_ragged(path, rows);
+  const auto& o = rows.offsets;
+  std::vector<unsigned char> bytes(4 * rows.rows() + rows.values.size() * sizeof(T));
+  unsigned char* p = bytes.data();
+  for (std::size_t r = 0; r < rows.rows(); ++r) {
+    const std::int32_t d = row_length(path, o[r + 1] - o[r], r + 1);
+    std::memcpy(p, &d, 4);
+    if (d > 0) std::memcpy(p + 4, rows.values.data() + o[r], (o[r + 1] - o[r]) * sizeof(T));
+    p += 4 + (o[r + 1] - o[r]) * sizeof(T);
+  }
+  return bytes;
+}
+
+template <class T>
+void write_ragged(const std::string& path, const RaggedRows<T>& rows) {
+  check_ragged(path, rows);
+  const auto& o = rows.offsets;
   OutFile out(path);
   for (std::size_t r = 0; r < rows.rows(); ++r) {
     write_length(out, o[r + 1] - o[r], r + 1);
@@ -677,10 +890,32 @@ Matrix<T> read_points(const std::string& path, const std::function<void(double)>
   }
 }
 
+PartPlan plan_part(const std::string& path, std::size_t part, std::size_t parts) {
+  if (parts == 0 || part >= parts) fail(path, "part " + std::to_string(part) + " of " + std::to_string(parts) + " does not exist");
+  const Format f = format_from_path(path);
+  InFile in(path);
+  if (in.size() == 0) fail(path, "empty file, no rows");
+  return f == Format::csv ? plan_csv_part(in, part, parts) : plan_binary_part(in, f, part, parts);
+}
+
+template <class T>
+Matrix<T> read_part(const PartPlan& plan, std::uint64_t first_line, std::uint64_t data_end) {
+  static_assert(std::is_same_v<T, float> || std::is_same_v<T, double>, "points are float or double");
+  return plan.format == Format::csv ? read_csv_part<T>(plan, first_line, data_end) : read_binary_part<T>(plan);
+}
+
+void check_total_rows(const PartPlan& plan, std::uint64_t rows) { check_row_count(plan.path, rows, plan.header); }
+
 RaggedRows<std::int32_t> read_ivecs_rows(const std::string& path) { return read_ragged<std::int32_t>(path); }
 RaggedRows<float> read_fvecs_rows(const std::string& path) { return read_ragged<float>(path); }
 void write_ivecs(const std::string& path, const RaggedRows<std::int32_t>& rows) { write_ragged(path, rows); }
 void write_fvecs(const std::string& path, const RaggedRows<float>& rows) { write_ragged(path, rows); }
+std::vector<unsigned char> ivecs_bytes(const std::string& path, const RaggedRows<std::int32_t>& rows) {
+  return ragged_bytes(path, rows);
+}
+std::vector<unsigned char> fvecs_bytes(const std::string& path, const RaggedRows<float>& rows) {
+  return ragged_bytes(path, rows);
+}
 
 template <class T>
 void write_points(const std::string& path, const Matrix<T>& m) {
@@ -702,6 +937,8 @@ void write_points(const std::string& path, const Matrix<T>& m) {
 template Matrix<float> read_points<float>(const std::string&, const std::function<void(double)>&);
 template Matrix<double> read_points<double>(const std::string&, const std::function<void(double)>&);
 template Matrix<std::uint8_t> read_points<std::uint8_t>(const std::string&, const std::function<void(double)>&);
+template Matrix<float> read_part<float>(const PartPlan&, std::uint64_t, std::uint64_t);
+template Matrix<double> read_part<double>(const PartPlan&, std::uint64_t, std::uint64_t);
 template void write_points<float>(const std::string&, const Matrix<float>&);
 template void write_points<double>(const std::string&, const Matrix<double>&);
 

@@ -1,0 +1,540 @@
+// DistributedTree: the build (sample, top tree, points to their ranks, local trees) and the query
+// rounds (see the header and docs/mpi.md).
+#include "kdspace/mpi/distributed_tree.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "comm.hpp"
+#include "kdspace/points/detail/input_checks.hpp"
+#include "kdspace/points/detail/parallel.hpp"
+#include "kdspace/points/detail/result_sets.hpp"
+#include "kdspace/points/point_tree.hpp"
+#include "top_tree.hpp"
+
+namespace kdspace::mpi {
+namespace {
+
+using detail::Blocks;
+using detail::BlockWriter;
+using detail::Comm;
+using kdspace::detail::Candidate;
+using Failure = std::optional<std::string>;  // what a rank's local work threw, if anything
+
+template <class T>
+MPI_Datatype mpi_type() {
+  return sizeof(T) == sizeof(double) ? MPI_DOUBLE : MPI_FLOAT;
+}
+
+// Records on the wire are packed bytes, written and read with memcpy (no padding, any alignment).
+template <class V>
+unsigned char* put(unsigned char* p, const V& v) {
+  std::memcpy(p, &v, sizeof v);
+  return p + sizeof v;
+}
+template <class V>
+const unsigned char* get(const unsigned char* p, V& v) {
+  std::memcpy(&v, p, sizeof v);
+  return p + sizeof v;
+}
+
+// splitmix64: spreads the sample's positions within their strata.
+std::uint64_t mix(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+// The top tree's sample is gathered on every rank; this caps its size.
+constexpr std::uint64_t sample_bytes_cap = std::uint64_t{64} << 20;
+
+// Original indices are Index (32 bits) and the result files hold them as int32.
+constexpr std::uint64_t max_points = (std::uint64_t{1} << 31) - 1;
+
+}  // namespace
+
+template <class T, class Metric>
+struct DistributedTree<T, Metric>::Impl {
+  using Tree = PointTree<T, Dynamic, Metric>;
+
+  explicit Impl(MPI_Comm c) : comm(c) {}
+
+  Comm comm;
+  DistributedParams params;
+  std::size_t dim = 0;
+  std::uint64_t total = 0;
+  std::optional<detail::TopTree<T>> top;
+  std::optional<Tree> tree;           // none on a rank without points
+  std::vector<Index> original_index;  // of the local tree's points, by the index its build gave them
+  Traffic build_traffic;
+
+  std::size_t query_bytes(bool with_bound) const { return dim * sizeof(T) + (with_bound ? sizeof(T) : 0); }
+  static constexpr std::size_t candidate_bytes = sizeof(T) + sizeof(Index);
+
+  // ---- build ------------------------------------------------------------------------------------
+
+  void build(const T* rows, std::size_t n) {
+    Failure error = Comm::run_catching([&] {
+      if (dim == 0) throw Error("points have dimension 0");
+      if (n > 0 && rows == nullptr) throw Error("points: null pointer");
+      for (std::size_t i = 0; i < n; ++i)
+        kdspace::detail::check_finite(rows + i * dim, dim,
+                                      "point " + std::to_string(i + 1) + " of this rank");
+    });
+    const std::vector<std::uint64_t> dims = comm.agree(error, {dim, ~std::uint64_t{dim}});
+    if (dims[0] != ~dims[1])
+      throw Error("the ranks disagree on the dimension of the points: from " + std::to_string(~dims[1]) +
+                  " to " + std::to_string(dims[0]));
+    const std::vector<std::uint64_t> counts = comm.gather_all(n);
+    std::uint64_t first = 0;
+    for (int r = 0; r < comm.size(); ++r)
+      (r < comm.rank() ? first : total) += counts[static_cast<std::size_t>(r)];
+    total += first;
+    if (total == 0) throw Error("no points: the data is empty");
+    if (total > max_points)
+      throw Error("too many points: " + std::to_string(total) + " (at most 2^31 - 1 over all ranks)");
+
+    std::vector<T> sample;
+    std::vector<Index> sample_index;
+    gather_sample(rows, n, first, sample, sample_index);
+    comm.phase([&] { top.emplace(sample, sample_index, dim, comm.size()); });
+    sample = {};
+    sample_index = {};
+
+    std::vector<T> points;
+    redistribute(rows, n, first, points);
+    std::vector<T> lo(dim), hi(dim);
+    comm.phase([&] {
+      const std::size_t m = original_index.size();
+      if (m > 0) tree.emplace(points.data(), m, dim, params.build);
+      for (std::size_t a = 0; a < dim && m > 0; ++a) {
+        lo[a] = hi[a] = points[a];
+        for (std::size_t i = 1; i < m; ++i) {
+          lo[a] = std::min(lo[a], points[i * dim + a]);
+          hi[a] = std::max(hi[a], points[i * dim + a]);
+        }
+      }
+    });
+    points = {};  // the tree holds its own copy
+    share_boxes(lo, hi);
+  }
+
+  // Every rank gets the same sample: about sample_per_rank points a rank, each rank contributing in
+  // proportion to its points, taken one from each of equal strata of its rows.
+  void gather_sample(const T* rows, std::size_t n, std::uint64_t first, std::vector<T>& sample,
+                     std::vector<Index>& sample_index) {
+    const std::uint64_t ranks = static_cast<std::uint64_t>(comm.size());
+    const std::uint64_t per_rank = std::max<std::uint64_t>(1, params.sample_per_rank);
+    const std::uint64_t row_bytes = dim * sizeof(T) + sizeof(Index);
+    std::uint64_t target = per_rank > total / ranks ? total : per_rank * ranks;
+    target = std::min(target, std::max(ranks, sample_bytes_cap / row_bytes));
+    // This rank's share of the target, rounded so that the shares add up to it exactly.
+    const std::uint64_t mine = target * (first + n) / total - target * first / total;
+    std::vector<T> my_sample;
+    std::vector<Index> my_index;
+    comm.phase([&] {
+      my_sample.resize(mine * dim);
+      my_index.resize(mine);
+      for (std::uint64_t j = 0; j < mine; ++j) {
+        const std::uint64_t lo = j * n / mine, hi = (j + 1) * n / mine;
+        const std::uint64_t row = lo + mix(first + j) % (hi - lo);
+        std::copy_n(rows + row * dim, dim, my_sample.begin() + static_cast<std::ptrdiff_t>(j * dim));
+        my_index[j] = static_cast<Index>(first + row);
+      }
+    });
+    const std::vector<std::uint64_t> counts = comm.gather_all(mine);
+    std::vector<int> index_counts(counts.size()), index_displs(counts.size()), value_counts(counts.size()),
+        value_displs(counts.size());
+    std::uint64_t all = 0;
+    for (std::size_t r = 0; r < counts.size(); ++r) {
+      index_counts[r] = static_cast<int>(counts[r]);
+      index_displs[r] = static_cast<int>(all);
+      value_counts[r] = static_cast<int>(counts[r] * dim);
+      value_displs[r] = static_cast<int>(all * dim);
+      all += counts[r];
+    }
+    comm.phase([&] {
+      sample.resize(all * dim);
+      sample_index.resize(all);
+    });
+    MPI_Allgatherv(my_sample.data(), static_cast<int>(mine * dim), mpi_type<T>(), sample.data(),
+                   value_counts.data(), value_displs.data(), mpi_type<T>(), comm.get());
+    MPI_Allgatherv(my_index.data(), static_cast<int>(mine), MPI_UINT32_T, sample_index.data(),
+                   index_counts.data(), index_displs.data(), MPI_UINT32_T, comm.get());
+    const std::uint64_t sent = counts[static_cast<std::size_t>(comm.rank())] * row_bytes;
+    build_traffic.exchanges += 1;
+    build_traffic.messages += mine > 0 ? ranks - 1 : 0;
+    build_traffic.bytes += sent * (ranks - 1);
+  }
+
+  // Sends every point to the rank whose region holds it; fills original_index and points.
+  void redistribute(const T* rows, std::size_t n, std::uint64_t first, std::vector<T>& points) {
+    const std::size_t record = dim * sizeof(T) + sizeof(Index);
+    Blocks send;
+    Failure error = Comm::run_catching([&] {
+      std::vector<int> owner(n);
+      BlockWriter writer(comm.size());
+      for (std::size_t i = 0; i < n; ++i) {
+        owner[i] = top->rank_of_point(rows + i * dim, static_cast<Index>(first + i));
+        writer.count(owner[i], record);
+      }
+      writer.start();
+      for (std::size_t i = 0; i < n; ++i) {
+        unsigned char* p = put(writer.put(owner[i], record), static_cast<Index>(first + i));
+        std::memcpy(p, rows + i * dim, dim * sizeof(T));
+      }
+      send = writer.finish();
+    });
+    Blocks received = comm.exchange(send, build_traffic, error);
+    send = {};
+    comm.phase([&] {
+      const std::size_t m = received.bytes.size() / record;
+      points.resize(m * dim);
+      original_index.resize(m);
+      const unsigned char* p = received.bytes.data();
+      for (std::size_t i = 0; i < m; ++i, p += record) {
+        get(p, original_index[i]);
+        std::memcpy(points.data() + i * dim, p + sizeof(Index), dim * sizeof(T));
+      }
+    });
+  }
+
+  // Every rank learns the bounding box of every rank's points.
+  void share_boxes(const std::vector<T>& lo, const std::vector<T>& hi) {
+    const std::size_t ranks = static_cast<std::size_t>(comm.size());
+    std::vector<T> all_lo, all_hi;
+    std::vector<std::uint8_t> has_points;
+    comm.phase([&] {
+      all_lo.resize(ranks * dim);
+      all_hi.resize(ranks * dim);
+      has_points.resize(ranks);
+    });
+    const std::uint8_t mine = tree ? 1 : 0;
+    MPI_Allgather(lo.data(), static_cast<int>(dim), mpi_type<T>(), all_lo.data(), static_cast<int>(dim),
+                  mpi_type<T>(), comm.get());
+    MPI_Allgather(hi.data(), static_cast<int>(dim), mpi_type<T>(), all_hi.data(), static_cast<int>(dim),
+                  mpi_type<T>(), comm.get());
+    MPI_Allgather(&mine, 1, MPI_UINT8_T, has_points.data(), 1, MPI_UINT8_T, comm.get());
+    comm.phase([&] { top->set_boxes(all_lo, all_hi, has_points); });
+  }
+
+  // ---- queries ----------------------------------------------------------------------------------
+
+  // The queries of one round on the rank that brought them, and what came back for them.
+  struct Round {
+    std::size_t first = 0, count = 0;              // the rank's queries [first, first + count)
+    std::vector<std::vector<std::uint32_t>> sent;  // per rank: the round's queries sent there, in order
+    std::vector<std::vector<Candidate<T>>> found;  // per query of the round: candidates so far
+  };
+
+  // Blocks of query rows (and a bound after each, when given) for the ranks in round.sent.
+  Blocks send_queries(const T* queries, const Round& round, const std::vector<T>* bounds) const {
+    const std::size_t record = query_bytes(bounds != nullptr);
+    BlockWriter writer(comm.size());
+    for (int r = 0; r < comm.size(); ++r)
+      writer.count(r, round.sent[static_cast<std::size_t>(r)].size() * record);
+    writer.start();
+    for (int r = 0; r < comm.size(); ++r)
+      for (const std::uint32_t q : round.sent[static_cast<std::size_t>(r)]) {
+        unsigned char* p = writer.put(r, record);
+        std::memcpy(p, queries + (round.first + q) * dim, dim * sizeof(T));
+        if (bounds) put(p + dim * sizeof(T), (*bounds)[q]);
+      }
+    return writer.finish();
+  }
+
+  // Searches this rank's points for the queries received (each with its bound when with_bound,
+  // else +inf) and returns the answers in the order received: per query a uint32 count, then that
+  // many (internal distance, original index). search(q, bound, results) fills a result set.
+  template <class Search>
+  Blocks answer(const Blocks& received, bool with_bound, unsigned threads, QueryStats& stats,
+                const Search& search) const {
+    const std::size_t record = query_bytes(with_bound), ranks = static_cast<std::size_t>(comm.size());
+    const std::size_t n = received.bytes.size() / record;
+    std::vector<std::vector<Candidate<T>>> results(n);
+    std::vector<QueryStats> per_worker(kdspace::detail::resolve_threads(threads));
+    if (tree)
+      kdspace::detail::parallel_for(n, threads, 16, [&](std::size_t begin, std::size_t end, unsigned worker) {
+        std::vector<T> q(dim);
+        for (std::size_t i = begin; i < end; ++i) {
+          const unsigned char* p = received.bytes.data() + i * record;
+          std::memcpy(q.data(), p, dim * sizeof(T));
+          T bound = std::numeric_limits<T>::infinity();
+          if (with_bound) get(p + dim * sizeof(T), bound);
+          search(q.data(), bound, results[i], per_worker[worker]);
+        }
+      });
+    for (const QueryStats& s : per_worker) stats += s;
+
+    BlockWriter writer(comm.size());
+    std::size_t i = 0;
+    for (std::size_t r = 0; r < ranks; ++r)
+      for (std::uint64_t end = i + received.size(static_cast<int>(r)) / record; i < end; ++i)
+        writer.count(static_cast<int>(r), sizeof(std::uint32_t) + results[i].size() * candidate_bytes);
+    writer.start();
+    i = 0;
+    for (std::size_t r = 0; r < ranks; ++r)
+      for (std::uint64_t end = i + received.size(static_cast<int>(r)) / record; i < end; ++i) {
+        const auto& found = results[i];
+        unsigned char* p =
+            writer.put(static_cast<int>(r), sizeof(std::uint32_t) + found.size() * candidate_bytes);
+        p = put(p, static_cast<std::uint32_t>(found.size()));
+        for (const Candidate<T>& c : found) p = put(put(p, c.dist), original_index[c.index]);
+      }
+    return writer.finish();
+  }
+
+  // Adds the answers that came back to round.found, per query.
+  void take_answers(const Blocks& back, Round& round) const {
+    for (int r = 0; r < comm.size(); ++r) {
+      const unsigned char* p = back.data(r);
+      const unsigned char* end = p + back.size(r);
+      for (const std::uint32_t q : round.sent[static_cast<std::size_t>(r)]) {
+        std::uint32_t count = 0;
+        if (p + sizeof count > end)
+          throw Error("internal error: an answer block from rank " + std::to_string(r) + " is short");
+        p = get(p, count);
+        if (static_cast<std::size_t>(end - p) < count * candidate_bytes)
+          throw Error("internal error: an answer block from rank " + std::to_string(r) + " is short");
+        auto& found = round.found[q];
+        for (std::uint32_t j = 0; j < count; ++j) {
+          Candidate<T> c{};
+          p = get(get(p, c.dist), c.index);
+          found.push_back(c);
+        }
+      }
+    }
+  }
+
+  // The first `keep` candidates of each query, in (internal distance, original index) order, as
+  // true distances: the rows of the round, appended to out.
+  static void merge(Round& round, std::size_t keep, NeighborLists<T>& out) {
+    for (auto& found : round.found) {
+      std::sort(found.begin(), found.end(), kdspace::detail::comes_before);
+      if (found.size() > keep) found.resize(keep);
+      for (const Candidate<T>& c : found)
+        out.neighbors.push_back(Neighbor<T>{c.index, Metric::to_distance(c.dist)});
+      out.offsets.push_back(out.neighbors.size());
+      found = {};
+    }
+  }
+
+  // Starts a round: its queries, nothing sent or found yet.
+  Round start_round(std::size_t round_index, std::size_t nq) const {
+    Round round;
+    const std::size_t per_round = std::max<std::size_t>(1, params.queries_per_round);
+    round.first = std::min(nq, round_index * per_round);
+    round.count = std::min(nq - round.first, per_round);
+    round.sent.assign(static_cast<std::size_t>(comm.size()), {});
+    round.found.assign(round.count, {});
+    return round;
+  }
+
+  // The checks every batch makes, then the number of rounds, agreed by all ranks.
+  template <class Check>
+  std::size_t agree_rounds(const T* queries, std::size_t nq, const Check& check) const {
+    const Failure error = Comm::run_catching([&] {
+      check();
+      kdspace::detail::check_query_rows(queries, nq, dim);
+    });
+    const std::size_t per_round = std::max<std::size_t>(1, params.queries_per_round);
+    return static_cast<std::size_t>(comm.agree(error, {(nq + per_round - 1) / per_round}).front());
+  }
+
+  NeighborLists<T> knn(const T* queries, std::size_t nq, std::size_t k, unsigned threads,
+                       DistributedStats& stats) const {
+    const std::size_t rounds = agree_rounds(queries, nq, [&] { kdspace::detail::check_k(k, total); });
+    auto search = [&](const T* q, T bound, std::vector<Candidate<T>>& found, QueryStats& qs) {
+      kdspace::detail::KnnResults<T> results(k, bound, found);
+      tree->search_with(q, results, &qs);
+      results.sorted();
+    };
+    NeighborLists<T> out;
+    std::vector<T> scratch;
+    Failure error;
+    for (std::size_t round_index = 0; round_index < rounds; ++round_index) {
+      Round round = start_round(round_index, nq);
+      // 1. Each query to the rank whose region holds it.
+      std::vector<int> home(round.count);
+      Blocks send;
+      if (!error)
+        error = Comm::run_catching([&] {
+          for (std::uint32_t q = 0; q < round.count; ++q) {
+            home[q] = top->rank_of_query(queries + (round.first + q) * dim);
+            round.sent[static_cast<std::size_t>(home[q])].push_back(q);
+          }
+          send = send_queries(queries, round, nullptr);
+        });
+      Blocks received = comm.exchange(send, stats.traffic, error);
+      // 2. Its k nearest there, back.
+      error = Comm::run_catching([&] { send = answer(received, false, threads, stats.search, search); });
+      Blocks back = comm.exchange(send, stats.traffic, error);
+      // 3. The k-th distance bounds the answer: the query, with it, to the other ranks within it.
+      std::vector<T> bounds(round.count);
+      error = Comm::run_catching([&] {
+        take_answers(back, round);
+        for (auto& to : round.sent) to.clear();
+        for (std::uint32_t q = 0; q < round.count; ++q) {
+          const auto& found = round.found[q];
+          bounds[q] = found.size() == k ? found.back().dist : std::numeric_limits<T>::infinity();
+          top->template ranks_within<Metric>(queries + (round.first + q) * dim, bounds[q], scratch,
+                                             [&](int r) {
+                                               if (r != home[q])
+                                                 round.sent[static_cast<std::size_t>(r)].push_back(q);
+                                             });
+        }
+        stats.ranks_asked += round.count;
+        for (const auto& to : round.sent) stats.ranks_asked += to.size();
+        send = send_queries(queries, round, &bounds);
+      });
+      received = comm.exchange(send, stats.traffic, error);
+      // 4. Their candidates within the bound, back; merged.
+      error = Comm::run_catching([&] { send = answer(received, true, threads, stats.search, search); });
+      back = comm.exchange(send, stats.traffic, error);
+      error = Comm::run_catching([&] {
+        take_answers(back, round);
+        merge(round, k, out);
+      });
+    }
+    comm.agree(error);
+    stats.queries += nq;
+    stats.rounds += rounds;
+    return out;
+  }
+
+  NeighborLists<T> radius(const T* queries, std::size_t nq, T r, std::size_t max_results, unsigned threads,
+                          DistributedStats& stats) const {
+    const std::size_t rounds = agree_rounds(queries, nq, [&] {
+      if (std::isnan(r) || r < 0)
+        throw Error("radius must be a non-negative number, got " + std::to_string(r));
+      if (max_results == 0) throw Error("max_results must be at least 1");
+    });
+    const T limit = Metric::to_internal(r);
+    auto search = [&](const T* q, T /*bound*/, std::vector<Candidate<T>>& found, QueryStats& qs) {
+      if (max_results < tree->size()) {
+        kdspace::detail::KnnResults<T> results(max_results, limit, found);
+        tree->search_with(q, results, &qs);
+        results.sorted();
+      } else {
+        kdspace::detail::RangeResults<T> results(limit, found);
+        tree->search_with(q, results, &qs);
+        results.sorted();
+      }
+    };
+    NeighborLists<T> out;
+    std::vector<T> scratch;
+    Failure error;
+    for (std::size_t round_index = 0; round_index < rounds; ++round_index) {
+      Round round = start_round(round_index, nq);
+      // 1. Each query to every rank whose points lie within r.
+      Blocks send;
+      if (!error)
+        error = Comm::run_catching([&] {
+          for (std::uint32_t q = 0; q < round.count; ++q)
+            top->template ranks_within<Metric>(
+                queries + (round.first + q) * dim, limit, scratch,
+                [&](int to) { round.sent[static_cast<std::size_t>(to)].push_back(q); });
+          for (const auto& to : round.sent) stats.ranks_asked += to.size();
+          send = send_queries(queries, round, nullptr);
+        });
+      Blocks received = comm.exchange(send, stats.traffic, error);
+      // 2. The points within r there (the nearest max_results of them), back; merged.
+      error = Comm::run_catching([&] { send = answer(received, false, threads, stats.search, search); });
+      Blocks back = comm.exchange(send, stats.traffic, error);
+      error = Comm::run_catching([&] {
+        take_answers(back, round);
+        merge(round, max_results, out);
+      });
+    }
+    comm.agree(error);
+    stats.queries += nq;
+    stats.rounds += rounds;
+    return out;
+  }
+};
+
+template <class T, class Metric>
+DistributedTree<T, Metric>::DistributedTree(MPI_Comm comm, const T* rows, std::size_t n, std::size_t dim,
+                                            const DistributedParams& params)
+    : impl_(std::make_unique<Impl>(comm)) {
+  impl_->params = params;
+  impl_->dim = dim;
+  impl_->build(rows, n);
+}
+
+template <class T, class Metric>
+DistributedTree<T, Metric>::~DistributedTree() = default;
+template <class T, class Metric>
+DistributedTree<T, Metric>::DistributedTree(DistributedTree&&) noexcept = default;
+template <class T, class Metric>
+DistributedTree<T, Metric>& DistributedTree<T, Metric>::operator=(DistributedTree&&) noexcept = default;
+
+template <class T, class Metric>
+NeighborLists<T> DistributedTree<T, Metric>::knn_batch(const T* queries, std::size_t nq, std::size_t k,
+                                                       unsigned threads, DistributedStats* stats) const {
+  DistributedStats local;
+  NeighborLists<T> out = impl_->knn(queries, nq, k, threads, local);
+  if (stats) *stats += local;
+  return out;
+}
+
+template <class T, class Metric>
+NeighborLists<T> DistributedTree<T, Metric>::radius_batch(const T* queries, std::size_t nq, T r,
+                                                          std::size_t max_results, unsigned threads,
+                                                          DistributedStats* stats) const {
+  DistributedStats local;
+  NeighborLists<T> out = impl_->radius(queries, nq, r, max_results, threads, local);
+  if (stats) *stats += local;
+  return out;
+}
+
+template <class T, class Metric>
+std::size_t DistributedTree<T, Metric>::size() const {
+  return static_cast<std::size_t>(impl_->total);
+}
+template <class T, class Metric>
+std::size_t DistributedTree<T, Metric>::local_size() const {
+  return impl_->original_index.size();
+}
+template <class T, class Metric>
+std::size_t DistributedTree<T, Metric>::dim() const {
+  return impl_->dim;
+}
+template <class T, class Metric>
+int DistributedTree<T, Metric>::ranks() const {
+  return impl_->comm.size();
+}
+template <class T, class Metric>
+std::size_t DistributedTree<T, Metric>::local_depth() const {
+  return impl_->tree ? impl_->tree->depth() : 0;
+}
+template <class T, class Metric>
+std::size_t DistributedTree<T, Metric>::local_leaves() const {
+  return impl_->tree ? impl_->tree->leaf_count() : 0;
+}
+template <class T, class Metric>
+std::size_t DistributedTree<T, Metric>::local_nodes() const {
+  return impl_->tree ? impl_->tree->node_count() : 0;
+}
+template <class T, class Metric>
+std::size_t DistributedTree<T, Metric>::local_index_bytes() const {
+  return (impl_->tree ? impl_->tree->index_bytes() : 0) + impl_->original_index.capacity() * sizeof(Index);
+}
+template <class T, class Metric>
+const Traffic& DistributedTree<T, Metric>::build_traffic() const {
+  return impl_->build_traffic;
+}
+
+template class DistributedTree<float, L2>;
+template class DistributedTree<float, L1>;
+template class DistributedTree<float, Linf>;
+template class DistributedTree<double, L2>;
+template class DistributedTree<double, L1>;
+template class DistributedTree<double, Linf>;
+
+}  // namespace kdspace::mpi
