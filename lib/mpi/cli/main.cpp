@@ -105,12 +105,18 @@ int run_search(const SearchJob& job, const detail::Comm& comm) {
   const double query_s = slowest(comm, seconds_since(start));
 
   {
-    const kdspace::cli::ResultRows rows = kdspace::cli::result_rows(found, !job.distances.empty());
-    SharedOutput ids(comm, job.out, io::ivecs_bytes(job.out, rows.ids));
+    // This rank's rows of each file, as the bytes kdspace writes.
+    std::vector<unsigned char> id_bytes, distance_bytes;
+    comm.phase([&] {
+      const kdspace::cli::ResultRows rows = kdspace::cli::result_rows(found, !job.distances.empty());
+      id_bytes = io::ivecs_bytes(job.out, rows.ids);
+      if (!job.distances.empty()) distance_bytes = io::fvecs_bytes(job.distances, rows.distances);
+    });
+    SharedOutput ids(comm, job.out, id_bytes);
     if (job.distances.empty()) {
       ids.commit();
     } else {
-      SharedOutput distances(comm, job.distances, io::fvecs_bytes(job.distances, rows.distances));
+      SharedOutput distances(comm, job.distances, distance_bytes);
       ids.commit();
       distances.commit();
     }
