@@ -14,6 +14,7 @@ packages=(
   pybind11-dev python3-dev python3-numpy                     # the Python module (python/)
   python3-scipy python3-pytest                               # its tests (SciPy's kd-tree tests run against it)
   python3-pykdtree python3-opencv                            # its benchmark peer; the photo-matching example
+  libopenmpi-dev openmpi-bin                                 # kdspace-mpi (search over MPI ranks), its tests
 )
 
 missing=()

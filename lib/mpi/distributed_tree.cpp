@@ -290,8 +290,9 @@ struct DistributedTree<T, Metric>::Impl {
   }
 
   // Adds the answers that came back to round.found, per query.
-  void take_answers(const Blocks& back, Round& round) const {
+  void take_answers(const Blocks& back, Round& round, DistributedStats& stats) const {
     for (int r = 0; r < comm.size(); ++r) {
+      if (r != comm.rank()) stats.candidates += (back.size(r) - round.sent[static_cast<std::size_t>(r)].size() * sizeof(std::uint32_t)) / candidate_bytes;
       const unsigned char* p = back.data(r);
       const unsigned char* end = p + back.size(r);
       for (const std::uint32_t q : round.sent[static_cast<std::size_t>(r)]) {
@@ -377,7 +378,7 @@ struct DistributedTree<T, Metric>::Impl {
       // 3. The k-th distance bounds the answer: the query, with it, to the other ranks within it.
       std::vector<T> bounds(round.count);
       error = Comm::run_catching([&] {
-        take_answers(back, round);
+        take_answers(back, round, stats);
         for (auto& to : round.sent) to.clear();
         for (std::uint32_t q = 0; q < round.count; ++q) {
           const auto& found = round.found[q];
@@ -397,7 +398,7 @@ struct DistributedTree<T, Metric>::Impl {
       error = Comm::run_catching([&] { send = answer(received, true, threads, stats.search, search); });
       back = comm.exchange(send, stats.traffic, error);
       error = Comm::run_catching([&] {
-        take_answers(back, round);
+        take_answers(back, round, stats);
         merge(round, k, out);
       });
     }
@@ -447,7 +448,7 @@ struct DistributedTree<T, Metric>::Impl {
       error = Comm::run_catching([&] { send = answer(received, false, threads, stats.search, search); });
       Blocks back = comm.exchange(send, stats.traffic, error);
       error = Comm::run_catching([&] {
-        take_answers(back, round);
+        take_answers(back, round, stats);
         merge(round, max_results, out);
       });
     }

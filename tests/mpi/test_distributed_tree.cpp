@@ -4,7 +4,6 @@
 // Every rank makes the same data (same seeds), keeps its own rows and queries, and checks its own
 // answers. Only CHECK is used, never REQUIRE: a rank that stopped a test early would leave the
 // others waiting in the next collective call.
-#define CATCH_CONFIG_RUNNER
 #include <mpi.h>
 
 #include <algorithm>
@@ -208,13 +207,4 @@ TEST_CASE("mpi: k above the number of points and ranks of different dimensions a
     }
     CHECK(message == "the ranks disagree on the dimension of the points: from 2 to 3");
   }
-}
-
-int main(int argc, char** argv) {
-  MPI_Init(&argc, &argv);
-  const int code = Catch::Session().run(argc, argv);
-  int worst = code;
-  MPI_Allreduce(&code, &worst, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
-  MPI_Finalize();
-  return worst;
 }

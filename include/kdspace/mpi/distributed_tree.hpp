@@ -48,6 +48,7 @@ struct DistributedStats {
   std::uint64_t queries = 0;      ///< queries this rank brought
   std::uint64_t ranks_asked = 0;  ///< over those queries: the ranks that searched for them
   std::uint64_t rounds = 0;       ///< rounds of the batch
+  std::uint64_t candidates = 0;   ///< over those queries: candidates received from other ranks
   QueryStats search;              ///< this rank's local searches (for its own and others' queries)
   Traffic traffic;                ///< the batch's exchanges
 
@@ -55,6 +56,7 @@ struct DistributedStats {
     queries += o.queries;
     ranks_asked += o.ranks_asked;
     rounds = o.rounds > rounds ? o.rounds : rounds;
+    candidates += o.candidates;
     search += o.search;
     traffic += o.traffic;
     return *this;
