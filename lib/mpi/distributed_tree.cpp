@@ -99,12 +99,7 @@ struct DistributedTree<T, Metric>::Impl {
     if (total > max_points)
       throw Error("too many points: " + std::to_string(total) + " (at most 2^31 - 1 over all ranks)");
 
-    std::vector<T> sample;
-    std::vector<Index> sample_index;
-    gather_sample(rows, n, first, sample, sample_index);
-    comm.phase([&] { top.emplace(sample, sample_index, dim, comm.size()); });
-    sample = {};
-    sample_index = {};
+    make_top_tree(rows, n, first);
 
     std::vector<T> points;
     redistribute(rows, n, first, points);
@@ -124,10 +119,10 @@ struct DistributedTree<T, Metric>::Impl {
     share_boxes(lo, hi);
   }
 
-  // Every rank gets the same sample: about sample_per_rank points a rank, each rank contributing in
-  // proportion to its points, taken one from each of equal strata of its rows.
-  void gather_sample(const T* rows, std::size_t n, std::uint64_t first, std::vector<T>& sample,
-                     std::vector<Index>& sample_index) {
+  // Rank 0 gathers a sample, about sample_per_rank points a rank, each rank contributing in
+  // proportion to its points, one from each of equal strata of its rows; it builds the top tree
+  // and sends it to all.
+  void make_top_tree(const T* rows, std::size_t n, std::uint64_t first) {
     const std::uint64_t ranks = static_cast<std::uint64_t>(comm.size());
     const std::uint64_t per_rank = std::max<std::uint64_t>(1, params.sample_per_rank);
     const std::uint64_t row_bytes = dim * sizeof(T) + sizeof(Index);
@@ -147,6 +142,7 @@ struct DistributedTree<T, Metric>::Impl {
         my_index[j] = static_cast<Index>(first + row);
       }
     });
+    const bool root = comm.rank() == 0;
     const std::vector<std::uint64_t> counts = comm.gather_all(mine);
     std::vector<int> index_counts(counts.size()), index_displs(counts.size()), value_counts(counts.size()),
         value_displs(counts.size());
@@ -158,18 +154,35 @@ struct DistributedTree<T, Metric>::Impl {
       value_displs[r] = static_cast<int>(all * dim);
       all += counts[r];
     }
+    std::vector<T> sample;
+    std::vector<Index> sample_index;
     comm.phase([&] {
+      if (!root) return;
       sample.resize(all * dim);
       sample_index.resize(all);
     });
-    MPI_Allgatherv(my_sample.data(), static_cast<int>(mine * dim), mpi_type<T>(), sample.data(),
-                   value_counts.data(), value_displs.data(), mpi_type<T>(), comm.get());
-    MPI_Allgatherv(my_index.data(), static_cast<int>(mine), MPI_UINT32_T, sample_index.data(),
-                   index_counts.data(), index_displs.data(), MPI_UINT32_T, comm.get());
-    const std::uint64_t sent = counts[static_cast<std::size_t>(comm.rank())] * row_bytes;
+    MPI_Gatherv(my_sample.data(), static_cast<int>(mine * dim), mpi_type<T>(), sample.data(),
+                value_counts.data(), value_displs.data(), mpi_type<T>(), 0, comm.get());
+    MPI_Gatherv(my_index.data(), static_cast<int>(mine), MPI_UINT32_T, sample_index.data(),
+                index_counts.data(), index_displs.data(), MPI_UINT32_T, 0, comm.get());
+    if (!root && mine > 0) {
+      ++build_traffic.messages;
+      build_traffic.bytes += mine * row_bytes;
+    }
+
+    std::vector<unsigned char> tree_bytes;
+    Failure error = Comm::run_catching([&] {
+      if (root) tree_bytes = detail::TopTree<T>(sample, sample_index, dim, comm.size()).to_bytes();
+    });
+    std::uint64_t size = comm.agree(error, {tree_bytes.size()}).front();
+    comm.phase([&] { tree_bytes.resize(size); });
+    MPI_Bcast(tree_bytes.data(), static_cast<int>(size), MPI_BYTE, 0, comm.get());
+    if (root) {
+      build_traffic.messages += ranks - 1;  // as if sent to each rank (MPI_Bcast relays it in log P steps)
+      build_traffic.bytes += size * (ranks - 1);
+    }
     build_traffic.exchanges += 1;
-    build_traffic.messages += mine > 0 ? ranks - 1 : 0;
-    build_traffic.bytes += sent * (ranks - 1);
+    comm.phase([&] { top.emplace(tree_bytes, dim); });
   }
 
   // Sends every point to the rank whose region holds it; fills original_index and points.
@@ -292,7 +305,10 @@ struct DistributedTree<T, Metric>::Impl {
   // Adds the answers that came back to round.found, per query.
   void take_answers(const Blocks& back, Round& round, DistributedStats& stats) const {
     for (int r = 0; r < comm.size(); ++r) {
-      if (r != comm.rank()) stats.candidates += (back.size(r) - round.sent[static_cast<std::size_t>(r)].size() * sizeof(std::uint32_t)) / candidate_bytes;
+      if (r != comm.rank())
+        stats.candidates +=
+            (back.size(r) - round.sent[static_cast<std::size_t>(r)].size() * sizeof(std::uint32_t)) /
+            candidate_bytes;
       const unsigned char* p = back.data(r);
       const unsigned char* end = p + back.size(r);
       for (const std::uint32_t q : round.sent[static_cast<std::size_t>(r)]) {

@@ -1,9 +1,9 @@
 // The global top tree: which rank holds which region of space, and which ranks a query must ask.
 //
-// Built on every rank from the same sample of the points (gathered from all ranks), so every rank
-// holds the same tree without sending it. Recursive bisection: a node for ranks [r0, r1) splits the
-// sample along its axis of largest spread so that the left child's ranks get their share,
-// floor((r1 - r0) / 2) / (r1 - r0), of the node's sample points. Points are ordered by (coordinate,
+// Built by rank 0 from a sample of the points (gathered from all ranks) and sent to every rank as
+// bytes (to_bytes), so the sample crosses the network once, not once a rank. Recursive bisection: a node for
+// ranks [r0, r1) splits the sample along its axis of largest spread so that the left child's ranks get their
+// share, floor((r1 - r0) / 2) / (r1 - r0), of the node's sample points. Points are ordered by (coordinate,
 // original index), so that even many copies of one point divide evenly: a point goes left when
 // (p[axis], index) <= (split value, split index). (The median-of-sample partition is PANDA's global
 // kd-tree, Patwary et al., IPDPS 2016, sec. III-B, less its histogram refinement.)
@@ -24,6 +24,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -35,14 +36,53 @@ namespace kdspace::mpi::detail {
 template <class T>
 class TopTree {
  public:
-  /// sample: rows of `dim` coordinates, sample_index[i] the original index of row i; every rank
-  /// must pass the same sample in the same order.
+  /// sample: rows of `dim` coordinates, sample_index[i] the original index of row i.
   TopTree(const std::vector<T>& sample, const std::vector<Index>& sample_index, std::size_t dim, int ranks)
       : dim_(dim), ranks_(ranks) {
     std::vector<std::uint32_t> rows(sample_index.size());
     for (std::uint32_t i = 0; i < rows.size(); ++i) rows[i] = i;
     nodes_.reserve(2 * static_cast<std::size_t>(ranks));
     build(sample, sample_index, rows.data(), rows.size(), 0, ranks);
+  }
+
+  /// The tree as bytes (to send it), and back: TopTree(bytes, dim).
+  std::vector<unsigned char> to_bytes() const {
+    std::vector<unsigned char> bytes(sizeof(std::uint64_t) + nodes_.size() * node_bytes);
+    unsigned char* p = bytes.data();
+    const std::uint64_t count = nodes_.size();
+    std::memcpy(p, &count, sizeof count);
+    p += sizeof count;
+    for (const Node& node : nodes_) {
+      const std::uint64_t right = node.right;
+      const std::int32_t rank = node.rank;
+      std::memcpy(p, &node.axis, 4);
+      std::memcpy(p + 4, &node.value, sizeof(T));
+      std::memcpy(p + 4 + sizeof(T), &node.index, 4);
+      std::memcpy(p + 8 + sizeof(T), &right, 8);
+      std::memcpy(p + 16 + sizeof(T), &rank, 4);
+      p += node_bytes;
+    }
+    return bytes;
+  }
+
+  TopTree(const std::vector<unsigned char>& bytes, std::size_t dim) : dim_(dim), ranks_(0) {
+    std::uint64_t count = 0;
+    std::memcpy(&count, bytes.data(), sizeof count);
+    nodes_.resize(count);
+    const unsigned char* p = bytes.data() + sizeof count;
+    for (Node& node : nodes_) {
+      std::uint64_t right = 0;
+      std::int32_t rank = 0;
+      std::memcpy(&node.axis, p, 4);
+      std::memcpy(&node.value, p + 4, sizeof(T));
+      std::memcpy(&node.index, p + 4 + sizeof(T), 4);
+      std::memcpy(&right, p + 8 + sizeof(T), 8);
+      std::memcpy(&rank, p + 16 + sizeof(T), 4);
+      node.right = static_cast<std::size_t>(right);
+      node.rank = rank;
+      if (rank >= 0) ++ranks_;
+      p += node_bytes;
+    }
   }
 
   int ranks() const { return ranks_; }
@@ -195,6 +235,8 @@ class TopTree {
     visit_within<Metric>(id + 1, q, limit, nearest, visit);
     visit_within<Metric>(node.right, q, limit, nearest, visit);
   }
+
+  static constexpr std::size_t node_bytes = 20 + sizeof(T);
 
   std::size_t dim_;
   int ranks_;
