@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Strong and weak scaling of exact k-NN over MPI ranks (kdspace-mpi-bench), with the traffic between
-# ranks a query costs; prints markdown tables (and keeps the JSON lines in RESULTS_DIR/mpi.jsonl).
+# ranks a query costs; prints markdown tables, kept in RESULTS_DIR/mpi.md (the JSON lines in
+# RESULTS_DIR/mpi.jsonl). docs/mpi.md checks its model of the traffic against these counts.
 #
 # usage: bench/mpi_scaling.sh [RANKS...]          (default: 1 2 4 8 16)
 # environment: BUILD_DIR (default build/bench), RESULTS_DIR (default bench/results),
@@ -70,10 +71,16 @@ PYTHON
   done
 }
 
+{
+echo "## kdspace-mpi-bench: $(date -u +%Y-%m-%d), $(nproc) cores, load average $(cut -d' ' -f1-3 /proc/loadavg)"
 series "Strong scaling: 1M clustered 3-D points, 100k queries, k = 10" \
   --scaling strong --shape clustered --points 1000000 --queries 100000 --dim 3 --k 10
 series "Weak scaling: 250k clustered 3-D points and 25k queries a rank, k = 10" \
   --scaling weak --shape clustered --points 250000 --queries 25000 --dim 3 --k 10
-series "Strong scaling in 8-D: 200k uniform points, 20k queries, k = 10" \
+series "Strong scaling, uniform 3-D: 1M points, 20k queries, k = 10" \
+  --scaling strong --shape uniform --points 1000000 --queries 20000 --dim 3 --k 10
+series "Strong scaling, uniform 8-D: 200k points, 20k queries, k = 10" \
   --scaling strong --shape uniform --points 200000 --queries 20000 --dim 8 --k 10
+} >"$results/mpi.md"
+cat "$results/mpi.md"
 exit $status
