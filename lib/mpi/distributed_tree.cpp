@@ -341,82 +341,44 @@ struct DistributedTree<T, Metric>::Impl {
     }
   }
 
-  // Starts a round: its queries, nothing sent or found yet.
-  Round start_round(std::size_t round_index, std::size_t nq) const {
-    Round round;
-    const std::size_t per_round = std::max<std::size_t>(1, params.queries_per_round);
-    round.first = std::min(nq, round_index * per_round);
-    round.count = std::min(nq - round.first, per_round);
-    round.sent.assign(static_cast<std::size_t>(comm.size()), {});
-    round.found.assign(round.count, {});
-    return round;
+  // One step out and back: each query of round.sent (with its bound, when bounds are given) goes to
+  // its rank, which searches its points with search(q, bound, candidates, stats); the answers join
+  // round.found. `error` is what this rank's work before the step threw, agreed on in the first
+  // exchange; the returned failure, of the work after the second, is agreed on in the next one.
+  template <class Search>
+  Failure ask(const T* queries, Round& round, const std::vector<T>* bounds, Failure error, unsigned threads,
+              const Search& search, DistributedStats& stats) const {
+    Blocks send;
+    if (!error) error = Comm::run_catching([&] { send = send_queries(queries, round, bounds); });
+    const Blocks received = comm.exchange(send, stats.traffic, error);
+    error = Comm::run_catching(
+        [&] { send = answer(received, bounds != nullptr, threads, stats.search, search); });
+    const Blocks back = comm.exchange(send, stats.traffic, error);
+    return Comm::run_catching([&] { take_answers(back, round, stats); });
   }
 
-  // The checks every batch makes, then the number of rounds, agreed by all ranks.
-  template <class Check>
-  std::size_t agree_rounds(const T* queries, std::size_t nq, const Check& check) const {
-    const Failure error = Comm::run_catching([&] {
+  // A batch in rounds of up to queries_per_round queries a rank: steps(round, error) sends the
+  // round's queries where they must go (ask) and returns the failure of its last local work; then
+  // each query keeps its first `keep` candidates. check(): the batch's own checks, before any round.
+  template <class Check, class Steps>
+  NeighborLists<T> in_rounds(const T* queries, std::size_t nq, std::size_t keep, const Check& check,
+                             const Steps& steps, DistributedStats& stats) const {
+    const std::size_t per_round = std::max<std::size_t>(1, params.queries_per_round);
+    Failure error = Comm::run_catching([&] {
       check();
       kdspace::detail::check_query_rows(queries, nq, dim);
     });
-    const std::size_t per_round = std::max<std::size_t>(1, params.queries_per_round);
-    return static_cast<std::size_t>(comm.agree(error, {(nq + per_round - 1) / per_round}).front());
-  }
-
-  NeighborLists<T> knn(const T* queries, std::size_t nq, std::size_t k, unsigned threads,
-                       DistributedStats& stats) const {
-    const std::size_t rounds = agree_rounds(queries, nq, [&] { kdspace::detail::check_k(k, total); });
-    auto search = [&](const T* q, T bound, std::vector<Candidate<T>>& found, QueryStats& qs) {
-      kdspace::detail::KnnResults<T> results(k, bound, found);
-      tree->search_with(q, results, &qs);
-      results.sorted();
-    };
+    // Every rank takes part in as many rounds as the rank with the most queries needs.
+    const std::uint64_t rounds = comm.agree(error, {(nq + per_round - 1) / per_round}).front();
     NeighborLists<T> out;
-    std::vector<T> scratch;
-    Failure error;
-    for (std::size_t round_index = 0; round_index < rounds; ++round_index) {
-      Round round = start_round(round_index, nq);
-      // 1. Each query to the rank whose region holds it.
-      std::vector<int> home(round.count);
-      Blocks send;
-      if (!error)
-        error = Comm::run_catching([&] {
-          for (std::uint32_t q = 0; q < round.count; ++q) {
-            home[q] = top->rank_of_query(queries + (round.first + q) * dim);
-            round.sent[static_cast<std::size_t>(home[q])].push_back(q);
-          }
-          send = send_queries(queries, round, nullptr);
-        });
-      Blocks received = comm.exchange(send, stats.traffic, error);
-      // 2. Its k nearest there, back.
-      error = Comm::run_catching([&] { send = answer(received, false, threads, stats.search, search); });
-      Blocks back = comm.exchange(send, stats.traffic, error);
-      // 3. The k-th distance bounds the answer: the query, with it, to the other ranks within it.
-      std::vector<T> bounds(round.count);
-      error = Comm::run_catching([&] {
-        take_answers(back, round, stats);
-        for (auto& to : round.sent) to.clear();
-        for (std::uint32_t q = 0; q < round.count; ++q) {
-          const auto& found = round.found[q];
-          bounds[q] = found.size() == k ? found.back().dist : std::numeric_limits<T>::infinity();
-          top->template ranks_within<Metric>(queries + (round.first + q) * dim, bounds[q], scratch,
-                                             [&](int r) {
-                                               if (r != home[q])
-                                                 round.sent[static_cast<std::size_t>(r)].push_back(q);
-                                             });
-        }
-        stats.ranks_asked += round.count;
-        for (const auto& to : round.sent) stats.ranks_asked += to.size();
-        send = send_queries(queries, round, &bounds);
-      });
-      received = comm.exchange(send, stats.traffic, error);
-      // 4. Their candidates within the bound, back; merged.
-      error = Comm::run_catching([&] { send = answer(received, true, threads, stats.search, search); });
-      back = comm.exchange(send, stats.traffic, error);
-      error = Comm::run_catching([&] {
-        take_answers(back, round, stats);
-        merge(round, k, out);
-      });
+    for (std::uint64_t r = 0; r < rounds; ++r) {
+      Round round;
+      round.first = std::min<std::uint64_t>(nq, r * per_round);
+      round.count = std::min<std::size_t>(nq - round.first, per_round);
+      round.sent.assign(static_cast<std::size_t>(comm.size()), {});
+      round.found.assign(round.count, {});
+      error = steps(round, error);
+      if (!error) error = Comm::run_catching([&] { merge(round, keep, out); });
     }
     comm.agree(error);
     stats.queries += nq;
@@ -424,14 +386,57 @@ struct DistributedTree<T, Metric>::Impl {
     return out;
   }
 
+  // The ranks whose points lie within internal distance limit[q] of each query of the round, but
+  // `except[q]`, into round.sent.
+  void send_within(const T* queries, Round& round, const std::vector<T>& limit,
+                   const std::vector<int>& except, DistributedStats& stats) const {
+    std::vector<T> scratch;
+    for (auto& to : round.sent) to.clear();
+    for (std::uint32_t q = 0; q < round.count; ++q)
+      top->template ranks_within<Metric>(queries + (round.first + q) * dim, limit[q], scratch, [&](int r) {
+        if (r != except[q]) round.sent[static_cast<std::size_t>(r)].push_back(q);
+      });
+    for (const auto& to : round.sent) stats.ranks_asked += to.size();
+  }
+
+  NeighborLists<T> knn(const T* queries, std::size_t nq, std::size_t k, unsigned threads,
+                       DistributedStats& stats) const {
+    auto search = [&](const T* q, T bound, std::vector<Candidate<T>>& found, QueryStats& qs) {
+      kdspace::detail::KnnResults<T> results(k, bound, found);
+      tree->search_with(q, results, &qs);
+      results.sorted();
+    };
+    auto steps = [&](Round& round, Failure error) {
+      // 1. Each query to the rank whose region holds it (home), for its k nearest there.
+      std::vector<int> home(round.count);
+      if (!error)
+        error = Comm::run_catching([&] {
+          for (std::uint32_t q = 0; q < round.count; ++q) {
+            home[q] = top->rank_of_query(queries + (round.first + q) * dim);
+            round.sent[static_cast<std::size_t>(home[q])].push_back(q);
+          }
+          stats.ranks_asked += round.count;
+        });
+      error = ask(queries, round, nullptr, error, threads, search, stats);
+      // 2. Home's k-th distance bounds the answer: the query, with it, to the other ranks within it.
+      std::vector<T> bounds(round.count);
+      if (!error)
+        error = Comm::run_catching([&] {
+          for (std::uint32_t q = 0; q < round.count; ++q) {
+            const auto& found = round.found[q];
+            bounds[q] = found.size() == k ? found.back().dist : std::numeric_limits<T>::infinity();
+          }
+          send_within(queries, round, bounds, home, stats);
+        });
+      return ask(queries, round, &bounds, error, threads, search, stats);
+    };
+    return in_rounds(
+        queries, nq, k, [&] { kdspace::detail::check_k(k, total); }, steps, stats);
+  }
+
   NeighborLists<T> radius(const T* queries, std::size_t nq, T r, std::size_t max_results, unsigned threads,
                           DistributedStats& stats) const {
-    const std::size_t rounds = agree_rounds(queries, nq, [&] {
-      if (std::isnan(r) || r < 0)
-        throw Error("radius must be a non-negative number, got " + std::to_string(r));
-      if (max_results == 0) throw Error("max_results must be at least 1");
-    });
-    const T limit = Metric::to_internal(r);
+    const T limit = Metric::to_internal(r);  // as PointTree::radius_batch
     auto search = [&](const T* q, T /*bound*/, std::vector<Candidate<T>>& found, QueryStats& qs) {
       if (max_results < tree->size()) {
         kdspace::detail::KnnResults<T> results(max_results, limit, found);
@@ -443,35 +448,21 @@ struct DistributedTree<T, Metric>::Impl {
         results.sorted();
       }
     };
-    NeighborLists<T> out;
-    std::vector<T> scratch;
-    Failure error;
-    for (std::size_t round_index = 0; round_index < rounds; ++round_index) {
-      Round round = start_round(round_index, nq);
-      // 1. Each query to every rank whose points lie within r.
-      Blocks send;
+    auto steps = [&](Round& round, Failure error) {
+      // Each query to every rank whose points lie within r, for the points within r there.
       if (!error)
         error = Comm::run_catching([&] {
-          for (std::uint32_t q = 0; q < round.count; ++q)
-            top->template ranks_within<Metric>(
-                queries + (round.first + q) * dim, limit, scratch,
-                [&](int to) { round.sent[static_cast<std::size_t>(to)].push_back(q); });
-          for (const auto& to : round.sent) stats.ranks_asked += to.size();
-          send = send_queries(queries, round, nullptr);
+          send_within(queries, round, std::vector<T>(round.count, limit), std::vector<int>(round.count, -1),
+                      stats);
         });
-      Blocks received = comm.exchange(send, stats.traffic, error);
-      // 2. The points within r there (the nearest max_results of them), back; merged.
-      error = Comm::run_catching([&] { send = answer(received, false, threads, stats.search, search); });
-      Blocks back = comm.exchange(send, stats.traffic, error);
-      error = Comm::run_catching([&] {
-        take_answers(back, round, stats);
-        merge(round, max_results, out);
-      });
-    }
-    comm.agree(error);
-    stats.queries += nq;
-    stats.rounds += rounds;
-    return out;
+      return ask(queries, round, nullptr, error, threads, search, stats);
+    };
+    auto check = [&] {
+      if (std::isnan(r) || r < 0)
+        throw Error("radius must be a non-negative number, got " + std::to_string(r));
+      if (max_results == 0) throw Error("max_results must be at least 1");
+    };
+    return in_rounds(queries, nq, max_results, check, steps, stats);
   }
 };
 
