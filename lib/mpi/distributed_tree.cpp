@@ -403,7 +403,7 @@ struct DistributedTree<T, Metric>::Impl {
                        DistributedStats& stats) const {
     auto search = [&](const T* q, T bound, std::vector<Candidate<T>>& found, QueryStats& qs) {
       kdspace::detail::KnnResults<T> results(k, bound, found);
-      tree->search_with(q, results, &qs);
+      tree->query_with(q, results, SearchParams{}, &qs);
       results.sorted();
     };
     auto steps = [&](Round& round, Failure error) {
@@ -440,11 +440,11 @@ struct DistributedTree<T, Metric>::Impl {
     auto search = [&](const T* q, T /*bound*/, std::vector<Candidate<T>>& found, QueryStats& qs) {
       if (max_results < tree->size()) {
         kdspace::detail::KnnResults<T> results(max_results, limit, found);
-        tree->search_with(q, results, &qs);
+        tree->query_with(q, results, SearchParams{}, &qs);
         results.sorted();
       } else {
         kdspace::detail::RangeResults<T> results(limit, found);
-        tree->search_with(q, results, &qs);
+        tree->query_with(q, results, SearchParams{}, &qs);
         results.sorted();
       }
     };

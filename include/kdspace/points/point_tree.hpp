@@ -153,19 +153,6 @@ class PointTree {
     return finish(scratch, stats, local);
   }
 
-  /// The exact search with the caller's result set, for queries the methods above do not cover
-  /// (kdspace_mpi: the k nearest within a bound, merged across ranks). The traversal offers it
-  /// every point it scores as offer(internal distance, index given to the build), prunes every
-  /// cell whose lower bound exceeds bound(), and stops nothing early (full() is not consulted
-  /// without a check budget). detail::KnnResults and detail::RangeResults are such result sets.
-  template <class Results>
-  void search_with(const T* q, Results& results, QueryStats* stats = nullptr) const {
-    check_query(q, "query");
-    QueryStats local;
-    run(q, results, SearchParams{}, local);
-    if (stats) *stats += local;
-  }
-
   /// Indices of the points p with lo <= p <= hi on every axis (closed box), ascending.
   std::vector<Index> box(const T* lo, const T* hi, QueryStats* stats = nullptr) const {
     check_query(lo, "box lower corner", true);
