@@ -50,7 +50,7 @@ std::uint64_t mix(std::uint64_t x) {
   return x ^ (x >> 31);
 }
 
-// The top tree's sample is gathered on every rank; this caps its size.
+// The most bytes of sample rank 0 gathers for the top tree (about 4M points of 3 floats).
 constexpr std::uint64_t sample_bytes_cap = std::uint64_t{64} << 20;
 
 // Original indices are Index (32 bits) and the result files hold them as int32.
@@ -174,7 +174,7 @@ struct DistributedTree<T, Metric>::Impl {
     Failure error = Comm::run_catching([&] {
       if (root) tree_bytes = detail::TopTree<T>(sample, sample_index, dim, comm.size()).to_bytes();
     });
-    std::uint64_t size = comm.agree(error, {tree_bytes.size()}).front();
+    const std::uint64_t size = comm.agree(error, {tree_bytes.size()}).front();
     comm.phase([&] { tree_bytes.resize(size); });
     MPI_Bcast(tree_bytes.data(), static_cast<int>(size), MPI_BYTE, 0, comm.get());
     if (root) {
