@@ -67,8 +67,8 @@ void require_same_tree(const BoxTree& a, const BoxTree& b) {
 }
 
 /// Checks the tree's structure: depth-first layout, child links in range, every reference a valid
-/// box, leaf ranges tiling the reference array, each leaf's boxes ascending, and every box of the
-/// scene overlapping the cell of each leaf that holds it.
+/// box, leaf ranges starting at multiples of 4 and not overlapping, each leaf's boxes ascending, and
+/// every box of the scene overlapping the cell of each leaf that holds it.
 void check_structure(const BoxTree& tree) {
   const auto& nodes = tree.nodes();
   const auto& refs = tree.references();
@@ -78,23 +78,27 @@ void check_structure(const BoxTree& tree) {
     std::size_t depth;
   };
   std::vector<Item> stack{{0, tree.bounds(), 0}};
-  std::size_t next_ref = 0, leaves = 0, max_depth = 0;
-  std::vector<std::uint32_t> order;  // leaves in depth-first order
+  std::size_t leaves = 0, reached = 0, references = 0, max_depth = 0, next_ref = 0;
   while (!stack.empty()) {
     const Item it = stack.back();
     stack.pop_back();
     REQUIRE(it.node < nodes.size());
+    ++reached;
     const BoxNode& n = nodes[it.node];
     max_depth = std::max(max_depth, it.depth);
     if (n.is_leaf()) {
       ++leaves;
+      references += n.count();
+      // Leaves come in depth-first order, each starting at the next multiple of 4.
       REQUIRE(n.first() == next_ref);
-      next_ref += n.count();
+      next_ref += (n.count() + 3) / 4 * 4;
       REQUIRE(next_ref <= refs.size());
+      const std::uint32_t* ids = tree.leaf_references(n);
+      REQUIRE(ids == refs.data() + n.first());
       for (std::uint32_t i = 0; i < n.count(); ++i) {
-        const std::uint32_t box = refs[n.first() + i];
+        const std::uint32_t box = ids[i];
         REQUIRE(box < tree.size());
-        if (i > 0) REQUIRE(refs[n.first() + i - 1] < box);
+        if (i > 0) REQUIRE(ids[i - 1] < box);
         for (int a = 0; a < 3; ++a) {
           REQUIRE(tree.box(box).lo[a] <= it.cell.hi[a]);
           REQUIRE(tree.box(box).hi[a] >= it.cell.lo[a]);
@@ -114,10 +118,12 @@ void check_structure(const BoxTree& tree) {
   }
   CHECK(next_ref == refs.size());
   CHECK(leaves == tree.stats().leaves);
+  CHECK(reached == nodes.size());
   CHECK(nodes.size() == 2 * leaves - 1);
+  CHECK(nodes.size() == tree.stats().nodes);
   CHECK(max_depth == tree.stats().depth);
   CHECK(tree.stats().depth <= tree.stats().max_depth);
-  CHECK(tree.stats().references == refs.size());
+  CHECK(tree.stats().references == references);
 }
 
 }  // namespace

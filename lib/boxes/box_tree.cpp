@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "build_common.hpp"
+#include "layout.hpp"
 #include "kdspace/error.hpp"
 #include "sah_cost.hpp"
 
@@ -100,6 +101,9 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
       bounds_.lo[a] = std::min(bounds_.lo[a], b.lo[a]);
       bounds_.hi[a] = std::max(bounds_.hi[a], b.hi[a]);
     }
+  for (int a = 0; a < 3; ++a)
+    if (!(std::abs(bounds_.lo[a]) <= float_trace_limit && std::abs(bounds_.hi[a]) <= float_trace_limit))
+      float_range_ = false;
 
   const std::size_t max_depth = params.max_depth == 0 ? automatic_max_depth(n) : params.max_depth;
   detail::TreeWriter out;
@@ -118,12 +122,10 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
         break;
     }
   }
-  nodes_ = std::move(out.nodes);
-  references_ = std::move(out.references);
-  nodes_.shrink_to_fit();
-  references_.shrink_to_fit();
-  leaf_boxes_.resize(references_.size());
-  for (std::size_t r = 0; r < references_.size(); ++r) leaf_boxes_[r] = boxes_[references_[r]];
+  detail::TreeLayout layout = detail::lay_out(out, boxes_);
+  nodes_ = std::move(layout.nodes);
+  references_ = std::move(layout.references);
+  blocks_ = std::move(layout.blocks);
   stats_.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   stats_.depth = out.depth;
   stats_.max_depth = max_depth;
@@ -133,9 +135,7 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
 void BoxTree::compute_stats() {
   stats_.boxes = boxes_.size();
   stats_.nodes = nodes_.size();
-  stats_.references = references_.size();
-  stats_.references_per_box =
-      boxes_.empty() ? 0 : static_cast<double>(references_.size()) / static_cast<double>(boxes_.size());
+  stats_.references = 0;
   stats_.leaves = stats_.empty_leaves = stats_.max_leaf_size = 0;
   if (boxes_.empty()) {
     stats_.leaves = stats_.empty_leaves = 1;
@@ -157,6 +157,7 @@ void BoxTree::compute_stats() {
     const double p = whole > 0 ? measure(item.cell) / whole : 1.0;
     if (node.is_leaf()) {
       ++stats_.leaves;
+      stats_.references += node.count();
       stats_.empty_leaves += node.count() == 0 ? 1 : 0;
       stats_.max_leaf_size = std::max<std::size_t>(stats_.max_leaf_size, node.count());
       cost += static_cast<double>(params_.K_i) * node.count() * p;
@@ -170,6 +171,7 @@ void BoxTree::compute_stats() {
     }
   }
   stats_.sah_cost = cost;
+  stats_.references_per_box = static_cast<double>(stats_.references) / static_cast<double>(boxes_.size());
 }
 
 }  // namespace kdspace

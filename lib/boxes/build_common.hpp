@@ -92,19 +92,34 @@ inline std::vector<BoxRef> root_references(const std::vector<Box3f>& boxes) {
   return refs;
 }
 
+/// A node as the builds write it: depth first, an inner node's left child next to it and its right
+/// child's index stored; a leaf's first reference and count. The final layout (layout.hpp) turns
+/// these into BoxNodes with adjacent children.
+struct BuiltNode {
+  float split = 0;           ///< inner nodes
+  std::uint32_t first = 0;   ///< leaf: first reference
+  std::uint32_t count = 0;   ///< leaf: boxes
+  std::uint32_t right = 0;   ///< inner: index of the right child
+  std::int8_t axis = -1;     ///< 0..2, or -1 for a leaf
+
+  bool is_leaf() const { return axis < 0; }
+};
+
 /// Collects nodes depth first. Subtrees built on other threads are written into their own writer
 /// and appended, their links shifted.
 class TreeWriter {
  public:
-  std::vector<BoxNode> nodes;
+  std::vector<BuiltNode> nodes;
   std::vector<std::uint32_t> references;
   std::size_t depth = 0;
 
   void add_leaf(std::vector<std::uint32_t> box_ids, std::size_t at_depth) {
     std::sort(box_ids.begin(), box_ids.end());
     check_limits(nodes.size() + 1, references.size() + box_ids.size());
-    nodes.push_back(BoxNode::leaf(static_cast<std::uint32_t>(references.size()),
-                                  static_cast<std::uint32_t>(box_ids.size())));
+    BuiltNode leaf;
+    leaf.first = static_cast<std::uint32_t>(references.size());
+    leaf.count = static_cast<std::uint32_t>(box_ids.size());
+    nodes.push_back(leaf);
     references.insert(references.end(), box_ids.begin(), box_ids.end());
     depth = std::max(depth, at_depth);
   }
@@ -112,30 +127,36 @@ class TreeWriter {
   /// Adds an inner node whose right child is not known yet; returns its index.
   std::size_t add_inner(const Split& s) {
     check_limits(nodes.size() + 1, references.size());
-    nodes.push_back(BoxNode::inner(s.axis, s.position, 0));
+    BuiltNode inner;
+    inner.axis = static_cast<std::int8_t>(s.axis);
+    inner.split = s.position;
+    nodes.push_back(inner);
     return nodes.size() - 1;
   }
   /// The next node to be written becomes the right child of inner node `index`.
-  void link_right_child(std::size_t index) {
-    const BoxNode& n = nodes[index];
-    nodes[index] = BoxNode::inner(n.axis(), n.split(), static_cast<std::uint32_t>(nodes.size()));
-  }
+  void link_right_child(std::size_t index) { nodes[index].right = static_cast<std::uint32_t>(nodes.size()); }
 
   void append(const TreeWriter& sub) {
     check_limits(nodes.size() + sub.nodes.size(), references.size() + sub.references.size());
     const auto node_shift = static_cast<std::uint32_t>(nodes.size());
     const auto ref_shift = static_cast<std::uint32_t>(references.size());
-    for (const BoxNode& n : sub.nodes)
-      nodes.push_back(n.is_leaf() ? BoxNode::leaf(n.first() + ref_shift, n.count())
-                                  : BoxNode::inner(n.axis(), n.split(), n.right_child() + node_shift));
+    for (BuiltNode n : sub.nodes) {
+      if (n.is_leaf())
+        n.first += ref_shift;
+      else
+        n.right += node_shift;
+      nodes.push_back(n);
+    }
     references.insert(references.end(), sub.references.begin(), sub.references.end());
     depth = std::max(depth, sub.depth);
   }
 
  private:
   static void check_limits(std::size_t node_count, std::size_t reference_count) {
-    if (node_count >= (std::size_t{1} << 30) || reference_count >= (std::size_t{1} << 30))
-      throw Error("box tree too large: more than 2^30 nodes or box references (lower max_depth)");
+    // The final layout pads each leaf's references to a multiple of 4 (at most 4 times as many, in
+    // 32 bits) and may leave node slots unused (at most 4 times as many, in 30 bits).
+    if (node_count >= (std::size_t{1} << 28) || reference_count >= (std::size_t{1} << 30))
+      throw Error("box tree too large: more than 2^28 nodes or 2^30 box references (lower max_depth)");
   }
 };
 

@@ -13,9 +13,13 @@
 //
 // Queries are const and thread-safe. A ray hits a closed, solid box: touching a face, an edge or a
 // corner is a hit, and a ray starting inside a box hits it at t_min. The closest hit is the one with
-// the smallest t, then the smallest box index. Ray parameters are computed in double precision
-// (t = (face - origin) / direction, with the reciprocal of the direction precomputed); the reported t
-// is that value rounded to float (a hit farther than the float range reports FLT_MAX).
+// the smallest t, then the smallest box index. Whether and where a ray hits a box is decided in double
+// precision (t = (face - origin) * (1 / direction), the reciprocal precomputed); the reported t is
+// that value rounded to float (a hit farther than the float range reports FLT_MAX). The traversal
+// itself runs in float, its intervals widened by far more than float rounding, and tests a leaf's
+// boxes four at a time in float, as a filter that can only let through more boxes than the double
+// test accepts; so the answers are those of a traversal in double (rays whose parameters could leave
+// the float range are traced in double).
 #pragma once
 
 #include <cstddef>
@@ -89,8 +93,9 @@ struct BoxBuildParams {
 };
 
 /// A node of the tree: 8 bytes. Nodes are stored depth first; an inner node's left child is the
-/// next node and its right child is at right_child(). A leaf holds the box indices
-/// references()[first(), first() + count()), ascending.
+/// next node and its right child is at right_child() (so a ray going left needs no link: the next
+/// node's address is known before this one is read). A leaf holds the box indices
+/// references()[first(), first() + count()), ascending; first() is a multiple of 4.
 struct BoxNode {
   static constexpr std::uint32_t leaf_tag = 3;
 
@@ -125,15 +130,22 @@ struct BoxNode {
   friend bool operator!=(const BoxNode& a, const BoxNode& b) { return !(a == b); }
 };
 
+/// Four of a leaf's boxes, stored per coordinate so that the traversal tests them in one go (SSE):
+/// plane[a][lane] is min a of the lane's box for a = 0..2 and max (a - 3) for a = 3..5. A leaf of
+/// count boxes owns ceil(count / 4) blocks; the lanes past count repeat its last box.
+struct alignas(32) LeafBlock {
+  float plane[6][4];
+};
+
 /// What a build made, and what it took.
 struct BoxTreeStats {
   std::size_t boxes = 0;
-  std::size_t nodes = 0;
+  std::size_t nodes = 0;           ///< inner nodes and leaves
   std::size_t leaves = 0;
   std::size_t empty_leaves = 0;
   std::size_t depth = 0;          ///< of the deepest leaf (a root leaf: 0)
   std::size_t max_depth = 0;      ///< the cap the build ran with
-  std::size_t references = 0;     ///< box entries over all leaves
+  std::size_t references = 0;     ///< box entries over all leaves (without the padding to blocks of 4)
   std::size_t max_leaf_size = 0;  ///< boxes in the fullest leaf
   double references_per_box = 0;  ///< references / boxes: how often straddling boxes were duplicated
   /// Expected cost of a ray through the scene bounds, the SAH cost of the tree (W&H 2006):
@@ -161,13 +173,18 @@ class BoxTree {
   std::size_t depth() const { return stats_.depth; }
   std::size_t leaf_count() const { return stats_.leaves; }
   std::size_t node_count() const { return nodes_.size(); }
+  /// The nodes, depth first; the root is nodes()[0], the left child of inner node i is i + 1.
   const std::vector<BoxNode>& nodes() const { return nodes_; }
+  /// The box indices of all leaves, leaf after leaf; a leaf's start is a multiple of 4, and the slots
+  /// between one leaf's end and the next leaf's start repeat the leaf's last index.
   const std::vector<std::uint32_t>& references() const { return references_; }
-  /// Bytes held: the boxes (24 each), the nodes (8 each) and per reference its index (4) and a copy of
-  /// its box (24), kept in leaf order so that a leaf's boxes are tested without an indirection.
+  /// The box indices held by a leaf node: leaf_references(n)[0 .. n.count()), ascending.
+  const std::uint32_t* leaf_references(const BoxNode& leaf) const { return references_.data() + leaf.first(); }
+  /// Bytes held: the boxes (24 each), the nodes (8 each), the references (4 each) and the leaf blocks
+  /// (96 bytes per 4 references: a copy of each leaf's boxes, tested without an indirection).
   std::size_t memory_bytes() const {
     return boxes_.capacity() * sizeof(Box3f) + nodes_.capacity() * sizeof(BoxNode) +
-           references_.capacity() * sizeof(std::uint32_t) + leaf_boxes_.capacity() * sizeof(Box3f);
+           references_.capacity() * sizeof(std::uint32_t) + blocks_.capacity() * sizeof(LeafBlock);
   }
 
   // ---- single rays (const, thread-safe) ----------------------------------------------------------
@@ -200,8 +217,10 @@ class BoxTree {
   }
 
  private:
+  template <class Real, bool AnyHit>
+  Hit trace(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
   template <bool AnyHit>
-  Hit trace(const Ray& ray, double t_min, double t_max, RayStats& stats) const;
+  Hit trace_any_precision(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
   template <bool AnyHit>
   std::vector<Hit> trace_batch(const Ray* rays, std::size_t n, unsigned threads, RayStats* stats) const;
   void compute_stats();
@@ -211,7 +230,12 @@ class BoxTree {
   BoxBuildParams params_;
   std::vector<BoxNode> nodes_;
   std::vector<std::uint32_t> references_;
-  std::vector<Box3f> leaf_boxes_;  ///< leaf_boxes_[r] = boxes_[references_[r]]: a leaf's boxes side by side
+  std::vector<LeafBlock> blocks_;  ///< blocks_[r / 4] holds the box of references_[r] in lane r % 4
+  /// Scenes and ray origins within +-2^62, with direction components 0 or of magnitude 2^-64 to
+  /// 2^64, are traced in float: a ray parameter is then at most 2^127, never overflows.
+  static constexpr float float_trace_limit = 0x1p62f;
+  /// Every coordinate of the scene lies within float_trace_limit.
+  bool float_range_ = true;
   BoxTreeStats stats_;
 };
 

@@ -1,0 +1,176 @@
+// A ray prepared for the BoxTree traversal in float or in double, the widening that keeps the
+// traversal's decisions conservative, and the four-at-a-time box filter of the float traversal.
+//
+// Why float is safe (TraversalRay<float>): for a scene and an origin within +-2^62 and direction
+// components 0 or of magnitude 2^-64 .. 2^64, a ray parameter t = (plane - origin) * (1 / direction)
+// is at most 2^127, so nothing overflows. Computed in float it carries three roundings (the
+// difference, the reciprocal, the product), each of relative size at most 2^-24, and an absolute
+// error below 2^-149 where the product underflows; the double value the hit rule uses differs from
+// the exact one by a few 2^-53. So |t_float - t_double| <= 2^-22 |t| + 2^-149, and widening every
+// float parameter by 2^-20 |t| + 2^-126 (widen_down / widen_up) keeps every cell interval and every
+// box interval of the float traversal around the double one: the float traversal may visit more and
+// let more boxes through to the double test, never fewer.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <type_traits>
+
+#include "kdspace/boxes/box_tree.hpp"
+#include "kdspace/rays/ray.hpp"
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
+namespace kdspace::detail {
+
+/// How far the traversal in Real widens a ray parameter: relative and absolute parts.
+template <class Real>
+struct Widening;
+template <>
+struct Widening<float> {
+  static constexpr float relative = 0x1p-20f;
+  static constexpr float absolute = 0x1p-126f;
+};
+template <>
+struct Widening<double> {
+  // Far above double rounding: the double traversal's own parameters are computed as the hit rule's.
+  static constexpr double relative = 0x1p-40;
+  static constexpr double absolute = 0x1p-1022;
+};
+
+template <class Real>
+inline Real widen_down(Real t) {
+  return t - (std::abs(t) * Widening<Real>::relative + Widening<Real>::absolute);
+}
+template <class Real>
+inline Real widen_up(Real t) {
+  return t + (std::abs(t) * Widening<Real>::relative + Widening<Real>::absolute);
+}
+
+/// The smallest float above the finite f.
+inline float next_up(float f) {
+  if (f == 0) return std::numeric_limits<float>::denorm_min();
+  std::uint32_t bits;
+  std::memcpy(&bits, &f, sizeof bits);
+  bits = f > 0 ? bits + 1 : bits - 1;
+  std::memcpy(&f, &bits, sizeof f);
+  return f;
+}
+
+/// The largest Real <= t (t a double), and the smallest Real >= t; +-inf stay.
+template <class Real>
+inline Real round_down(double t) {
+  if constexpr (std::is_same_v<Real, double>) {
+    return t;
+  } else {
+    if (!(std::abs(t) <= std::numeric_limits<float>::max())) return t > 0 ? std::numeric_limits<float>::max() : -std::numeric_limits<float>::infinity();
+    const auto f = static_cast<float>(t);
+    return f > t ? -next_up(-f) : f;
+  }
+}
+template <class Real>
+inline Real round_up(double t) {
+  if constexpr (std::is_same_v<Real, double>) {
+    return t;
+  } else {
+    if (!(std::abs(t) <= std::numeric_limits<float>::max())) return t > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::max();
+    const auto f = static_cast<float>(t);
+    return f < t ? next_up(f) : f;
+  }
+}
+
+/// True when the ray can be traced in float through a scene within BoxTree's float range (see the
+/// top of this file): origin within +-limit, direction components 0 or of magnitude 2^-64 .. 2^64.
+inline bool fits_float_traversal(const Ray& ray, float limit) {
+  for (int a = 0; a < 3; ++a) {
+    const float d = std::abs(ray.direction[a]);
+    if (!(std::abs(ray.origin[a]) <= limit)) return false;
+    if (d != 0 && !(d >= 0x1p-64f && d <= 0x1p64f)) return false;
+  }
+  return true;
+}
+
+/// The ray in Real: origin, reciprocal direction, and per axis whether it runs towards -axis (sign
+/// bit set, -0 included).
+template <class Real>
+struct TraversalRay {
+  Real origin[3];
+  Real inverse[3];  ///< 1 / direction: +-inf on an axis the ray is parallel to (+0 or -0)
+  std::uint32_t negative[3];  ///< 1 when the direction's sign bit is set, else 0
+#if defined(__SSE2__)
+  __m128 origin4[3], inverse4[3];  ///< float only: the same, in every lane
+#endif
+
+  explicit TraversalRay(const Ray& r) {
+    for (int a = 0; a < 3; ++a) {
+      origin[a] = static_cast<Real>(r.origin[a]);
+      negative[a] = std::signbit(r.direction[a]) ? 1u : 0u;
+      // A float direction, even +-0, has a reciprocal in Real (+-inf for +-0).
+      inverse[a] = Real(1) / static_cast<Real>(r.direction[a]);
+#if defined(__SSE2__)
+      if constexpr (std::is_same_v<Real, float>) {
+        origin4[a] = _mm_set1_ps(origin[a]);
+        inverse4[a] = _mm_set1_ps(inverse[a]);
+      }
+#endif
+    }
+  }
+};
+
+/// Lanes of `block` whose box the ray may hit within [t_lo, t_hi]: bit l for lane l. A filter: it
+/// lets through every box the double slab test accepts over that range (and a few more). In double
+/// it lets all four through and the double test decides alone.
+template <class Real>
+inline unsigned block_candidates(const LeafBlock& block, const TraversalRay<Real>& r, Real t_lo, Real t_hi);
+
+template <>
+inline unsigned block_candidates<double>(const LeafBlock& /*block*/, const TraversalRay<double>& /*r*/,
+                                         double /*t_lo*/, double /*t_hi*/) {
+  return 0xfu;
+}
+
+template <>
+inline unsigned block_candidates<float>(const LeafBlock& block, const TraversalRay<float>& r, float t_lo,
+                                        float t_hi) {
+  // Per axis the ray enters the slab at the face it meets first: max for a ray towards +axis, min for
+  // one towards -axis (-0 included). On a parallel axis the reciprocal is +-inf, which gives -inf /
+  // +inf (no bound) for an origin inside the slab, a rejection outside, and NaN (0 * inf) for an
+  // origin in a face plane; max/min below ignore a NaN in their first operand, so such a face
+  // bounds nothing and the double test decides.
+#if defined(__SSE2__)
+  __m128 t_near = _mm_set1_ps(t_lo), t_far = _mm_set1_ps(t_hi);
+  for (int a = 0; a < 3; ++a) {
+    const int enter = a + 3 * static_cast<int>(r.negative[a]), leave = a + 3 - 3 * static_cast<int>(r.negative[a]);
+    const __m128 t0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(block.plane[enter]), r.origin4[a]), r.inverse4[a]);
+    const __m128 t1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(block.plane[leave]), r.origin4[a]), r.inverse4[a]);
+    t_near = _mm_max_ps(t0, t_near);  // MAXPS/MINPS return the second operand when either is NaN
+    t_far = _mm_min_ps(t1, t_far);
+  }
+  const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  const __m128 relative = _mm_set1_ps(Widening<float>::relative);
+  const __m128 absolute = _mm_set1_ps(Widening<float>::absolute);
+  t_near = _mm_sub_ps(t_near, _mm_add_ps(_mm_mul_ps(_mm_and_ps(t_near, magnitude), relative), absolute));
+  t_far = _mm_add_ps(t_far, _mm_add_ps(_mm_mul_ps(_mm_and_ps(t_far, magnitude), relative), absolute));
+  return static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(t_near, t_far)));
+#else
+  unsigned mask = 0;
+  for (int lane = 0; lane < 4; ++lane) {
+    float t_near = t_lo, t_far = t_hi;
+    for (int a = 0; a < 3; ++a) {
+      const int enter = a + 3 * static_cast<int>(r.negative[a]), leave = a + 3 - 3 * static_cast<int>(r.negative[a]);
+      const float t0 = (block.plane[enter][lane] - r.origin[a]) * r.inverse[a];
+      const float t1 = (block.plane[leave][lane] - r.origin[a]) * r.inverse[a];
+      if (t0 > t_near) t_near = t0;  // false for NaN, as above
+      if (t1 < t_far) t_far = t1;
+    }
+    if (widen_down(t_near) <= widen_up(t_far)) mask |= 1u << lane;
+  }
+  return mask;
+#endif
+}
+
+}  // namespace kdspace::detail
