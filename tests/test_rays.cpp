@@ -244,6 +244,10 @@ std::vector<NamedParams> all_builds() {
   builds.push_back({"sah", p});
   p.method = BoxBuildMethod::sah_nlogn;
   builds.push_back({"sah_nlogn", p});
+  p.binning_threshold = 1;
+  builds.push_back({"sah_nlogn binned at every node", p});
+  p.binning_threshold = 0;
+  builds.push_back({"sah_nlogn exact at every node", p});
   p.probability = kdspace::HitProbability::volume;
   builds.push_back({"sah_nlogn volume", p});
   p = BoxBuildParams{};

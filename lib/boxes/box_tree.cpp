@@ -160,7 +160,7 @@ void BoxTree::compute_stats() {
       stats_.references += node.count();
       stats_.empty_leaves += node.count() == 0 ? 1 : 0;
       stats_.max_leaf_size = std::max<std::size_t>(stats_.max_leaf_size, node.count());
-      cost += static_cast<double>(params_.K_i) * node.count() * p;
+      cost += static_cast<double>(params_.K_i) * detail::box_tests(node.count()) * p;
     } else {
       cost += static_cast<double>(params_.K_t) * p;
       Box3f left = item.cell, right = item.cell;

@@ -1,5 +1,5 @@
-// The SAH cost model (see sah_cost.hpp). Kept out of line so that both SAH builds run the very same
-// arithmetic and therefore choose the very same planes.
+// The SAH cost model (see sah_cost.hpp). The sweep is kept out of line so that both exact SAH builds
+// run the very same arithmetic and therefore choose the very same planes.
 #include "sah_cost.hpp"
 
 namespace kdspace::detail {
@@ -52,50 +52,31 @@ SahCostModel::SahCostModel(const BoxBuildParams& params, const Box3f& cell)
   }
 }
 
-double SahCostModel::leaf_cost(std::size_t n) const {
-  return k_i_ * static_cast<double>(n);
-}
-
-double SahCostModel::cost(double p_left, double p_right, std::size_t n_left, std::size_t n_right) const {
-  const double lambda = (n_left == 0 || n_right == 0) ? empty_factor_ : 1.0;
-  return lambda *
-         (k_t_ + k_i_ * (p_left * static_cast<double>(n_left) + p_right * static_cast<double>(n_right)));
-}
-
-SplitCandidate SahCostModel::evaluate(int axis, float position, std::size_t n_left, std::size_t n_right,
-                                      std::size_t n_planar) const {
-  const double w_left = static_cast<double>(position) - static_cast<double>(cell_.lo[axis]);
-  const double w_right = static_cast<double>(cell_.hi[axis]) - static_cast<double>(position);
-  const double p_left = fixed_[axis] + per_width_[axis] * w_left;
-  const double p_right = fixed_[axis] + per_width_[axis] * w_right;
-  const double cost_left = cost(p_left, p_right, n_left + n_planar, n_right);
-  const double cost_right = cost(p_left, p_right, n_left, n_right + n_planar);
-  SplitCandidate c;
-  c.split.axis = axis;
-  c.split.position = position;
-  c.split.planar_left = cost_left <= cost_right;
-  c.cost = c.split.planar_left ? cost_left : cost_right;
-  c.split.n_left = n_left + (c.split.planar_left ? n_planar : 0);
-  c.split.n_right = n_right + (c.split.planar_left ? 0 : n_planar);
-  return c;
-}
-
 void sweep_axis(const Event* events, std::size_t count, int axis, std::size_t n, const Box3f& cell,
-                const SahCostModel& model, std::optional<SplitCandidate>& best) {
+                const SahCostModel& model, std::optional<SplitCandidate>& best, std::size_t before,
+                std::size_t gone) {
   // Boxes entirely left of the plane, entirely right, and lying in it; a box that straddles the
   // plane counts on both sides. Boxes ending at the plane are left of it, boxes starting at it right.
-  std::size_t n_left = 0, n_right = n;
+  std::size_t n_left = before, n_right = n - gone;
   std::size_t i = 0;
   while (i < count) {
-    const float p = events[i].position;
-    std::size_t ending = 0, lying = 0, starting = 0;
-    while (i < count && events[i].position == p && events[i].type() == Event::end) ++ending, ++i;
-    while (i < count && events[i].position == p && events[i].type() == Event::planar) ++lying, ++i;
-    while (i < count && events[i].position == p && events[i].type() == Event::start) ++starting, ++i;
+    const Event& first = events[i];
+    const float p = first.position();
+    std::size_t of_type[3] = {0, 0, 0};  // ending at p, lying in p, starting at p
+    do {
+      ++of_type[events[i].type()];
+      ++i;
+    } while (i < count && events[i].same_position(first));
+    const std::size_t ending = of_type[Event::end], lying = of_type[Event::planar],
+                      starting = of_type[Event::start];
     n_right -= ending + lying;
     if (inside_cell(cell, axis, p)) {
-      const SplitCandidate c = model.evaluate(axis, p, n_left, n_right, lying);
-      if (!best || c.better_than(*best)) best = c;
+      // The cost alone first; the candidate is made only when it wins (same arithmetic, same cost).
+      const double cost = model.cost_of(axis, p, n_left, n_right, lying);
+      if (!best || cost <= best->cost) {
+        const SplitCandidate c = model.evaluate(axis, p, n_left, n_right, lying);
+        if (!best || c.better_than(*best)) best = c;
+      }
     }
     n_left += starting + lying;
   }

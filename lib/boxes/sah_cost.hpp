@@ -1,12 +1,14 @@
 // The SAH cost model shared by both SAH builds and by the tree statistics.
 //
-// Both builds must pick the very same plane, so the cost of a candidate is computed in one place
-// (sah_cost.cpp, not inlined into either build) from exact inputs: the cell, the plane and three
-// counts. Ties between planes of equal cost go to the smaller axis, then the smaller position.
+// Both exact builds must pick the very same plane, so both sweep their candidates with one function
+// (sweep_axis in sah_cost.cpp, compiled once), which computes the cost of a candidate from exact
+// inputs: the cell, the plane and three counts. Ties between planes of equal cost go to the smaller
+// axis, then the smaller position.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <optional>
 #include <vector>
 
@@ -51,21 +53,62 @@ class CellMeasure {
   double whole_ = 0;
 };
 
-/// Evaluates candidate planes of one node (the SAH of W&H 2006, with planar events).
+/// The cost units of testing n boxes: the traversal tests a leaf's boxes four at a time (LeafBlock),
+/// so a leaf of 1 to 4 boxes costs one test, of 5 to 8 two, and so on.
+inline double box_tests(std::size_t n) {
+  return static_cast<double>((n + 3) / 4);
+}
+
+/// Evaluates candidate planes of one node (the SAH of W&H 2006, with planar events), with the cost
+/// of a leaf counted in tests of four boxes (box_tests).
 class SahCostModel {
  public:
   SahCostModel(const BoxBuildParams& params, const Box3f& cell);
 
+  /// The cost of the plane at `position`: the cheaper placement of the n_planar boxes lying in it
+  /// (evaluate() says which).
+  double cost_of(int axis, float position, std::size_t n_left, std::size_t n_right,
+                 std::size_t n_planar) const {
+    double p_left, p_right;
+    probabilities(axis, position, p_left, p_right);
+    const double cost_left = cost(p_left, p_right, n_left + n_planar, n_right);
+    if (n_planar == 0) return cost_left;
+    const double cost_right = cost(p_left, p_right, n_left, n_right + n_planar);
+    return cost_left <= cost_right ? cost_left : cost_right;
+  }
+
   /// The cheaper of the two placements of the n_planar boxes lying in the plane, with its cost:
   /// cost(n_left + n_planar, n_right) or cost(n_left, n_right + n_planar); left on a tie.
   SplitCandidate evaluate(int axis, float position, std::size_t n_left, std::size_t n_right,
-                          std::size_t n_planar) const;
+                          std::size_t n_planar) const {
+    double p_left, p_right;
+    probabilities(axis, position, p_left, p_right);
+    const double cost_left = cost(p_left, p_right, n_left + n_planar, n_right);
+    const double cost_right = n_planar == 0 ? cost_left : cost(p_left, p_right, n_left, n_right + n_planar);
+    SplitCandidate c;
+    c.split.axis = axis;
+    c.split.position = position;
+    c.split.planar_left = cost_left <= cost_right;
+    c.cost = c.split.planar_left ? cost_left : cost_right;
+    c.split.n_left = n_left + (c.split.planar_left ? n_planar : 0);
+    c.split.n_right = n_right + (c.split.planar_left ? 0 : n_planar);
+    return c;
+  }
 
-  /// The cost of not splitting: K_i * n.
-  double leaf_cost(std::size_t n) const;
+  /// The cost of not splitting: K_i * box_tests(n).
+  double leaf_cost(std::size_t n) const { return k_i_ * box_tests(n); }
 
  private:
-  double cost(double p_left, double p_right, std::size_t n_left, std::size_t n_right) const;
+  void probabilities(int axis, float position, double& p_left, double& p_right) const {
+    const double w_left = static_cast<double>(position) - static_cast<double>(cell_.lo[axis]);
+    const double w_right = static_cast<double>(cell_.hi[axis]) - static_cast<double>(position);
+    p_left = fixed_[axis] + per_width_[axis] * w_left;
+    p_right = fixed_[axis] + per_width_[axis] * w_right;
+  }
+  double cost(double p_left, double p_right, std::size_t n_left, std::size_t n_right) const {
+    const double lambda = (n_left == 0 || n_right == 0) ? empty_factor_ : 1.0;
+    return lambda * (k_t_ + k_i_ * (p_left * box_tests(n_left) + p_right * box_tests(n_right)));
+  }
 
   Box3f cell_;
   /// The measure of the part of the cell of width w along axis k is fixed_[k] + per_width_[k] * w,
@@ -75,24 +118,47 @@ class SahCostModel {
   double k_t_, k_i_, empty_factor_;
 };
 
-/// A boundary of a clipped box along one axis (an "event" of W&H 2006). Sorted by (position, type):
-/// at one position the ends come first, then the flat boxes, then the starts, which is the order the
-/// sweep needs to count the boxes on each side of a plane.
-/// 8 bytes: the builds move hundreds of millions of them.
+/// A boundary of a clipped box along one axis (an "event" of W&H 2006), packed in one 64-bit key
+/// that sorts by (position, type, reference): at one position the ends come first, then the flat
+/// boxes, then the starts. 8 bytes, one integer comparison: the builds sort and move hundreds of
+/// millions of them.
 struct Event {
   enum Type : std::uint32_t { end = 0, planar = 1, start = 2 };
 
-  float position;
-  std::uint32_t ref_and_type;  ///< bits 0-29: the reference's position in its node's list; 30-31: type
+  /// Bits 32-63: the position as an integer of the same order (-0 taken as +0); bits 30-31: the
+  /// type; bits 0-29: the reference's position in its node's list.
+  std::uint64_t key;
 
-  Event(float pos, std::uint32_t ref, Type type) : position(pos), ref_and_type(ref | (type << 30)) {}
-  std::uint32_t ref() const { return ref_and_type & 0x3fffffffu; }
-  Type type() const { return static_cast<Type>(ref_and_type >> 30); }
+  Event(float pos, std::uint32_t ref, Type type)
+      : key(static_cast<std::uint64_t>(ordered_bits(pos)) << 32 | static_cast<std::uint64_t>(type) << 30 |
+            ref) {}
+  float position() const {
+    const auto u = static_cast<std::uint32_t>(key >> 32);
+    const std::uint32_t bits = (u & 0x80000000u) ? u ^ 0x80000000u : ~u;
+    float f;
+    std::memcpy(&f, &bits, sizeof f);
+    return f;
+  }
+  std::uint32_t ref() const { return static_cast<std::uint32_t>(key) & 0x3fffffffu; }
+  Type type() const { return static_cast<Type>((static_cast<std::uint32_t>(key) >> 30) & 3u); }
+  /// True when both lie at the same position.
+  bool same_position(const Event& o) const { return (key >> 32) == (o.key >> 32); }
   /// The same event for the reference's new position in a child's list.
-  Event moved_to(std::uint32_t ref) const { return Event(position, ref, type()); }
+  Event moved_to(std::uint32_t ref) const {
+    Event e = *this;
+    e.key = (key & ~std::uint64_t{0x3fffffffu}) | ref;
+    return e;
+  }
 
-  friend bool operator<(const Event& a, const Event& b) {
-    return a.position < b.position || (a.position == b.position && a.type() < b.type());
+  friend bool operator<(const Event& a, const Event& b) { return a.key < b.key; }
+
+ private:
+  /// The bits of f, flipped so that unsigned integer order is float order.
+  static std::uint32_t ordered_bits(float f) {
+    f += 0.0f;  // -0 becomes +0: the two are one position
+    std::uint32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    return (bits & 0x80000000u) ? ~bits : bits | 0x80000000u;
   }
 };
 
@@ -109,10 +175,12 @@ inline void add_events(std::vector<Event>& out, const Box3f& bounds, int axis, s
 }
 
 /// Sweeps the sorted events of one axis of a node holding n boxes and keeps the best candidate plane
-/// in `best` (the incremental sweep of W&H 2006, over one dimension). Only planes strictly inside the cell
-/// are candidates.
+/// in `best` (the incremental sweep of W&H 2006, over one dimension). Only planes strictly inside
+/// the cell are candidates. The events may be those of a window of positions only: then `before`
+/// boxes begin before the window's first event and `gone` end before it (a flat box counts in both).
 void sweep_axis(const Event* events, std::size_t count, int axis, std::size_t n, const Box3f& cell,
-                const SahCostModel& model, std::optional<SplitCandidate>& best);
+                const SahCostModel& model, std::optional<SplitCandidate>& best, std::size_t before = 0,
+                std::size_t gone = 0);
 
 /// The split a SAH build makes, or none when no candidate costs less than a leaf.
 inline std::optional<Split> accept_split(const std::optional<SplitCandidate>& best, const SahCostModel& model,

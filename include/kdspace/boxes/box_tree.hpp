@@ -56,21 +56,21 @@ struct BoxBuildParams {
   MedianPosition median_position = MedianPosition::middle;
 
   // SAH cost of splitting cell V at plane p (Wald & Havran 2006, with their planar events):
-  //   C(p) = lambda(p) * (K_t + K_i * (P(left|V) * |O_left| + P(right|V) * |O_right|))
-  // with lambda(p) = 1 - empty_bonus when one side holds no box, else 1. A node becomes a leaf when
-  // no plane costs less than K_i * |O|, the cost of testing all its boxes. Only the ratio K_i / K_t
-  // and empty_bonus shape the tree.
-  // The defaults come from measurement (bench/rays_scaling.cpp --tune: 1e5 uniform and clustered
-  // boxes, 3e3 clustered boxes; random rays and primary rays): trace speed is flat for K_i / K_t
-  // between 0.5 and 1; K_i / K_t = 1.5 with empty_bonus 0.2 traced 10-30% slower, 3 slower still.
-  // An empty bonus above 0.1 mostly adds empty leaves on such scenes (0.5: up to 30% slower). A node
-  // step (a dependent load and an unpredictable branch) costs more than the slab test of a box
-  // stored in its leaf.
+  //   C(p) = lambda(p) * (K_t + K_i * (P(left|V) * T(|O_left|) + P(right|V) * T(|O_right|)))
+  // with lambda(p) = 1 - empty_bonus when one side holds no box, else 1, and T(n) = ceil(n / 4) the
+  // box tests of a leaf of n boxes: the traversal tests a leaf's boxes four at a time (LeafBlock).
+  // A node becomes a leaf when no plane costs less than K_i * T(|O|). Only the ratio K_i / K_t and
+  // empty_bonus shape the tree.
+  // The defaults come from measurement (interleaved timings of primary and random rays on 1e5
+  // uniform and clustered boxes and on the triangle boxes of two scanned meshes): a node step (a
+  // dependent load and an unpredictable branch) costs several times a test of four boxes, and trace
+  // speed is flat for K_i / K_t between about 0.15 and 0.5 (one box test per box, K_i = 0.75, as
+  // before the four-box tests, traced 10-40% slower on those scenes).
 
   /// Cost of one traversal step (an inner node).
   float K_t = 1.0f;
-  /// Cost of one ray-box test.
-  float K_i = 0.75f;
+  /// Cost of one test of up to four boxes of a leaf.
+  float K_i = 0.25f;
   /// Reward for cutting off empty space, in [0, 1) (W&H use 0.2: their lambda = 80%). Small by
   /// default: it pays in sparse scenes, and costs little in dense ones.
   float empty_bonus = 0.1f;
@@ -88,6 +88,11 @@ struct BoxBuildParams {
   /// Well spread scenes stay far below it (SAH trees: 1.5 to 5 references per box); boxes that
   /// overlap everywhere would otherwise be copied into both children at every level, 2^depth times.
   float max_references_per_box = 16;
+  /// sah_nlogn only: a node holding more than this many boxes places its plane by min-max binning
+  /// (128 equal bins per axis, one pass over its boxes, no sorting) instead of the exact event sweep,
+  /// which takes over below it. 0 = the exact sweep everywhere, and then the tree is exactly the one
+  /// `sah` builds.
+  std::size_t binning_threshold = 256;
   /// Threads for the build; 0 = all hardware threads. The tree does not depend on it.
   unsigned threads = 1;
 };
@@ -149,7 +154,7 @@ struct BoxTreeStats {
   std::size_t max_leaf_size = 0;  ///< boxes in the fullest leaf
   double references_per_box = 0;  ///< references / boxes: how often straddling boxes were duplicated
   /// Expected cost of a ray through the scene bounds, the SAH cost of the tree (W&H 2006):
-  /// sum over inner nodes of K_t * P(node) + sum over leaves of K_i * |boxes| * P(leaf),
+  /// sum over inner nodes of K_t * P(node) + sum over leaves of K_i * ceil(|boxes| / 4) * P(leaf),
   /// P(cell) = SA(cell) / SA(scene bounds). Always by surface area, whatever `probability` the
   /// build used, so that trees built either way can be compared.
   double sah_cost = 0;
