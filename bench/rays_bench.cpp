@@ -2,48 +2,66 @@
 // one process.
 //
 // Contenders
-//   kdspace          BoxTree with the default build (sah_nlogn, one thread); closest_hit_batch.
+//   kdspace          BoxTree with the default build (sah_nlogn, one thread); closest_hit_batch for
+//                    closest hits, any_hit per ray for shadow rays.
 //   embree-user-Q    Embree user geometry (RTC_GEOMETRY_TYPE_USER), one primitive per box: the bounds
 //                    callback returns the box, the intersect callback runs kdspace's closed slab test
 //                    (double precision from the float data, t rounded to float; a ray starting inside
-//                    a box hits it at tnear; closest t, equal t to the smaller box index).
+//                    a box hits it at tnear; closest t, equal t to the smaller box index), the occluded
+//                    callback the same test, ending the ray at its first box.
 //   embree-tri-Q     Embree triangles (RTC_GEOMETRY_TYPE_TRIANGLE): each box as 12 triangles over its
 //                    8 shared corners; box index = primID / 12.
 //   Q is the scene build quality, medium (RTC_BUILD_QUALITY_MEDIUM) or high (RTC_BUILD_QUALITY_HIGH):
 //   both for user geometry by default, medium for triangles (high, with its spatial splits, takes some
 //   40 s a build on 1e6 boxes = 12e6 triangles on one thread; --tri-quality medium,high adds it).
-//   Of the user-geometry variants the one with the higher geometric mean of its four trace speeds is
-//   marked "(peer)" in the table.
-// Embree traces with rtcIntersect1, one ray at a time through an RTCIntersectContext, as kdspace's
-// closest_hit does. The Embree device is created with "threads=1": its builds run on one thread, as
-// kdspace's default build does. For two threads both libraries spread the rays over two threads that
-// take chunks of 256 rays from a shared counter (kdspace: closest_hit_batch(rays, 2); Embree: the
-// calling thread and one std::thread, each calling rtcIntersect1), so each traces about half and a
-// costly part of the image does not leave one thread idle.
+//   Of the user-geometry variants the one with the higher geometric mean of its trace speeds is the
+//   scene's peer, marked "(peer)" in the table and used in the summary.
+// Embree traces with rtcIntersect1 / rtcOccluded1, one ray at a time through an RTCIntersectContext,
+// as kdspace's closest_hit / any_hit do. The Embree device is created with "threads=1": its builds run
+// on one thread, as kdspace's default build does. For two threads both libraries spread the rays over
+// two threads that take chunks of 256 rays from a shared counter (kdspace: closest_hit_batch(rays, 2)
+// and, for shadow rays, two threads calling any_hit; Embree: the calling thread and one std::thread),
+// so each traces about half and a costly part of the image does not leave one thread idle.
 //
-// Workloads: generate_boxes(n, uniform | clustered, seed 1) in the unit cube; primary rays of a
-// 1024 x 768 camera outside the scene (fit_camera, primary_rays) and 1e6 random rays (random_rays:
-// origins in the bounds grown by 10%, unit directions uniform on the sphere, seed 2).
+// Scenes
+//   uniform, clustered   generate_boxes(n, kind, seed 1) in the unit cube, for each --sizes n.
+//   mesh NAME            with --real DIR: the bounding boxes of the triangles of each mesh that
+//                        bench/real_data/fetch.sh DIR lists (read by bench/real_data/mesh_io.hpp;
+//                        scans without triangles are skipped): thin, elongated, overlapping boxes.
+//   voxels NAME          with --real DIR: the voxels of a grid of --voxels R cells along the mesh's
+//                        longest side that its surface passes through (rays_scenes.hpp): cubes sharing
+//                        faces, coplanar faces everywhere.
+// Rays (per scene)
+//   primary   a 1024 x 768 camera outside the scene (fit_camera, primary_rays): closest hit.
+//   random    1e6 rays from origins in the bounds grown by 10%, unit directions (random_rays, seed 2):
+//             closest hit.
+//   shadow    from each primary ray's hit point (kdspace's answer) towards a point light above and
+//             beside the scene, over t in [1e-4, 1] (the light at t = 1): any hit, the occlusion
+//             test of a renderer.
 //
 // Measured: the build (wall seconds, everything from the boxes to a traceable structure; Embree: new
 // scene, geometry, buffers, commit), memory (kdspace: memory_bytes(); Embree: the bytes its device
 // allocated for the scene, as reported by its memory monitor, plus for user geometry the 24-byte boxes
-// the callbacks read), and closest-hit speed in Mrays/s on 1 and 2 threads. Repetitions are
-// interleaved across contenders (repetition loop outside, contenders inside); medians are reported.
+// the callbacks read), and speed in Mrays/s on 1 and 2 threads. Repetitions are interleaved across
+// contenders (repetition loop outside, contenders inside); medians are reported.
+// Profile (kdspace, after the repetitions, 1 thread): the tree (SAH cost, leaves, references per
+// box, depth), per ray set the nodes visited and boxes tested per ray, and the time per ray cold (as
+// measured) and hot: each ray traced twice in a row, the second time with its nodes and boxes in
+// cache, so cold - hot is the time spent waiting for memory.
 //
 // Agreement (first repetition, 1 thread): each Embree variant's hit for every ray against kdspace's:
 //   hit/miss      one hits, the other does not
-//   t differs     both hit, |t_a - t_b| > 1e-4 * max(t_a, t_b) + 1e-6 (the scene is the unit cube and
-//                 the directions are unit vectors: 1e-6 is some 8 float ulps of a coordinate)
+//   t differs     both hit, |t_a - t_b| > 1e-4 * max(t_a, t_b) + 1e-6 * scene diagonal (closest hit)
 //   near ties     both hit within that tolerance but not at the same float t, at different boxes:
 //                 rounding. Embree's BVH traversal computes node entries in float, so it may cull a box
-//                 the ray enters a rounding step (~1e-7 in t here) before the hit it already has;
-//                 triangles compute t in float, so coplanar faces of different boxes land here too.
+//                 the ray enters a rounding step before the hit it already has; triangles compute t in
+//                 float, so coplanar faces of different boxes land here too.
 //   ties          both hit at the same float t, at different boxes. kdspace resolves equal t to the
 //                 smaller index; the user callback does too when Embree hands it both boxes, but
 //                 Embree's BVH traversal may cull a node whose entry equals the current tfar, so the
 //                 smaller index is not guaranteed there. (kdspace compares the double t and rounds
 //                 afterwards; Embree keeps a float tfar: boxes a rounding step apart are ties to it.)
+//                 For shadow rays any box will do: only hit/miss counts.
 //   grazing       any other difference where the closer of the two hits only grazes its box: the ray's
 //                 part inside that box (or, for a box one side reports and the other's slab test
 //                 rejects, its miss) is at most 1e-5 of the scene diagonal long. A ray along an edge or
@@ -58,22 +76,26 @@
 // (hit/miss or t differs), or when a library's 2-thread answers differ from its 1-thread ones; 2 for a
 // usage error.
 //
-// usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--reps R] [--rays M]
-//                           [--image WxH] [--quality medium,high] [--tri-quality medium,high] [--robust]
-//                           [--quick]
-//   --sizes     scene sizes in boxes (default 1000,100000,1000000; 1e5 is accepted)
-//   --kinds     scene kinds (default uniform,clustered)
+// usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--real DIR] [--voxels R]
+//                           [--only-real] [--reps R] [--rays M] [--image WxH] [--quality medium,high]
+//                           [--tri-quality medium,high] [--robust] [--quick]
+//   --sizes     synthetic scene sizes in boxes (default 1000,100000,1000000; 1e5 is accepted)
+//   --kinds     synthetic scene kinds (default uniform,clustered)
+//   --real      a folder filled by bench/real_data/fetch.sh: adds the mesh and voxel scenes
+//   --voxels    grid resolution of the voxel scenes (default 256; 0: no voxel scenes)
+//   --only-real no synthetic scenes
 //   --reps      repetitions (default 3)
 //   --rays      random rays (default 1000000)
 //   --image     primary rays: an image of W x H pixels (default 1024x768)
 //   --quality   Embree build qualities for user geometry (default medium,high)
-//   --tri-quality  Embree build qualities for triangles (default medium)
+//   --tri-quality  Embree build qualities for triangles (default medium; "none": no triangles)
 //   --robust    Embree scenes with RTC_SCENE_FLAG_ROBUST (names get "-robust"); default: no flags
 //   --quick     sizes 1000,100000, 200000 random rays, a 512x384 image, 1 repetition (explicit options
 //               still win)
 //
-// Output: per (size, kind) a markdown table and an agreement table, then one JSON line per measurement
-// ({"bench":"rays",...}). Progress goes to stderr.
+// Output: per scene a markdown table, a profile line and an agreement table, then one JSON line per
+// measurement ({"bench":"rays",...}); at the end a summary table of kdspace against the peer on every
+// scene. Progress goes to stderr.
 #include <embree3/rtcore.h>
 
 #include <algorithm>
@@ -93,8 +115,10 @@
 #include <vector>
 
 #include "kdspace/boxes/box_tree.hpp"
+#include "kdspace/error.hpp"
 #include "kdspace/rays/detail/slab.hpp"
 #include "kdspace/rays/scene_gen.hpp"
+#include "rays_scenes.hpp"
 
 namespace {
 
@@ -135,15 +159,18 @@ struct Options {
   std::size_t random_rays = 1000000;
   std::size_t width = 1024, height = 768;
   bool robust = false;  ///< RTC_SCENE_FLAG_ROBUST on the Embree scenes
+  std::string real_dir;           ///< fetch.sh's folder, or "" for no real scenes
+  std::size_t voxel_resolution = 256;
+  bool synthetic = true;
 };
 
 [[noreturn]] void usage(const char* problem) {
   if (problem) std::fprintf(stderr, "kdspace-rays-bench: %s\n", problem);
   std::fprintf(
       stderr,
-      "usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--reps R] [--rays M]\n"
-      "                          [--image WxH] [--quality medium,high] [--tri-quality medium,high]\n"
-      "                          [--robust] [--quick]\n");
+      "usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--real DIR] [--voxels R]\n"
+      "                          [--only-real] [--reps R] [--rays M] [--image WxH] [--quality medium,high]\n"
+      "                          [--tri-quality medium,high] [--robust] [--quick]\n");
   std::exit(2);
 }
 
@@ -195,7 +222,9 @@ Options parse(int argc, char** argv) {
     } else if (a == "--quality" || a == "--tri-quality") {
       std::vector<RTCBuildQuality>& qualities = a == "--quality" ? o.user_qualities : o.triangle_qualities;
       qualities.clear();
-      for (const std::string& s : split_list(next(), ',')) {
+      const std::string list = next();
+      if (a == "--tri-quality" && list == "none") continue;
+      for (const std::string& s : split_list(list, ',')) {
         if (s == "medium") {
           qualities.push_back(RTC_BUILD_QUALITY_MEDIUM);
         } else if (s == "high") {
@@ -204,7 +233,7 @@ Options parse(int argc, char** argv) {
           usage(("unknown build quality: " + s).c_str());
         }
       }
-      if (qualities.empty()) usage((a + ": no quality given").c_str());
+      if (qualities.empty() && a == "--quality") usage("--quality: no quality given");
     } else if (a == "--reps") {
       o.reps = static_cast<int>(std::min<std::size_t>(parse_count(next()), 1000));
       reps_given = true;
@@ -219,6 +248,13 @@ Options parse(int argc, char** argv) {
       image_given = true;
     } else if (a == "--robust") {
       o.robust = true;
+    } else if (a == "--real") {
+      o.real_dir = next();
+    } else if (a == "--voxels") {
+      const std::string r = next();
+      o.voxel_resolution = r == "0" ? 0 : parse_count(r);
+    } else if (a == "--only-real") {
+      o.synthetic = false;
     } else if (a == "--quick") {
       quick = true;
     } else if (a == "--help" || a == "-h") {
@@ -234,6 +270,154 @@ Options parse(int argc, char** argv) {
     if (!image_given) o.width = 512, o.height = 384;
   }
   return o;
+}
+
+// ---- Embree ---------------------------------------------------------------------------------------
+
+/// Bytes the Embree device holds: the memory monitor adds allocations and subtracts frees.
+std::atomic<std::int64_t> embree_bytes{0};
+
+bool count_embree_bytes(void* /*user*/, ssize_t bytes, bool /*post*/) {
+  embree_bytes += static_cast<std::int64_t>(bytes);
+  return true;
+}
+
+void report_embree_error(void* /*user*/, RTCError code, const char* message) {
+  std::fprintf(stderr, "kdspace-rays-bench: Embree error %d: %s\n", static_cast<int>(code),
+               message ? message : "");
+  std::exit(1);
+}
+
+/// A ray prepared once for the user-geometry callbacks, as kdspace prepares it for its traversal.
+/// Embree hands the callbacks the RTCIntersectContext given to rtcIntersect1 / rtcOccluded1; this
+/// struct begins with one (standard layout), so the callbacks reach the prepared ray through it
+/// (Embree's documented way of passing per-ray data to callbacks).
+struct RayContext {
+  RTCIntersectContext embree;
+  kdspace::detail::PreparedRay ray;  // the very preparation and slab test of kdspace's traversal
+  std::int32_t occluder = Hit::none;  ///< the box that ended a shadow ray
+
+  explicit RayContext(const Ray& r) : ray(r) { rtcInitIntersectContext(&embree); }
+};
+static_assert(std::is_standard_layout<RayContext>::value, "RayContext must start with the Embree context");
+
+using kdspace::detail::clip_to_box;
+
+void box_bounds(const RTCBoundsFunctionArguments* args) {
+  const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
+  RTCBounds* out = args->bounds_o;
+  out->lower_x = b.lo[0];
+  out->lower_y = b.lo[1];
+  out->lower_z = b.lo[2];
+  out->upper_x = b.hi[0];
+  out->upper_y = b.hi[1];
+  out->upper_z = b.hi[2];
+}
+
+[[noreturn]] void not_single(unsigned n) {
+  std::fprintf(stderr, "kdspace-rays-bench: user geometry called with N = %u (only rtc*1 calls are used)\n", n);
+  std::abort();
+}
+
+/// rtcIntersect1 calls this with N = 1 and our RayContext; anything else is not what we measure.
+void box_intersect(const RTCIntersectFunctionNArguments* args) {
+  if (args->N != 1) not_single(args->N);
+  if (args->valid[0] == 0) return;
+  const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
+  const kdspace::detail::PreparedRay& ray = reinterpret_cast<const RayContext*>(args->context)->ray;
+  RTCRayN* rays = RTCRayHitN_RayN(args->rayhit, 1);
+  RTCHitN* hits = RTCRayHitN_HitN(args->rayhit, 1);
+  float& tfar = RTCRayN_tfar(rays, 1, 0);
+  double t_near = RTCRayN_tnear(rays, 1, 0), t_far = tfar;
+  if (!clip_to_box(b, ray, t_near, t_far)) return;
+  constexpr double largest = std::numeric_limits<float>::max();
+  const auto t = static_cast<float>(t_near > largest ? largest : t_near);
+  unsigned& hit_geometry = RTCHitN_geomID(hits, 1, 0);
+  unsigned& hit_box = RTCHitN_primID(hits, 1, 0);
+  // Here t <= tfar (rounding to float keeps the order). Closest t; at equal t the smaller box index,
+  // or any box while there is no hit yet (a hit at exactly the ray's initial tfar).
+  if (!(t < tfar || hit_geometry == RTC_INVALID_GEOMETRY_ID || args->primID < hit_box)) return;
+  tfar = t;
+  RTCHitN_Ng_x(hits, 1, 0) = 0;
+  RTCHitN_Ng_y(hits, 1, 0) = 0;
+  RTCHitN_Ng_z(hits, 1, 0) = 0;
+  RTCHitN_u(hits, 1, 0) = 0;
+  RTCHitN_v(hits, 1, 0) = 0;
+  hit_box = args->primID;
+  hit_geometry = args->geomID;
+  RTCHitN_instID(hits, 1, 0, 0) = args->context->instID[0];
+}
+
+/// rtcOccluded1: the ray ends at the first box it hits over [tnear, tfar] (tfar = -inf says so).
+void box_occluded(const RTCOccludedFunctionNArguments* args) {
+  if (args->N != 1) not_single(args->N);
+  if (args->valid[0] == 0) return;
+  const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
+  auto* context = reinterpret_cast<RayContext*>(args->context);
+  float& tfar = RTCRayN_tfar(args->ray, 1, 0);
+  double t_near = RTCRayN_tnear(args->ray, 1, 0), t_far = tfar;
+  if (!clip_to_box(b, context->ray, t_near, t_far)) return;
+  tfar = -std::numeric_limits<float>::infinity();
+  context->occluder = static_cast<std::int32_t>(args->primID);
+}
+
+RTCRay make_ray(const Ray& ray, float t_min, float t_max) {
+  RTCRay r;
+  r.org_x = ray.origin[0];
+  r.org_y = ray.origin[1];
+  r.org_z = ray.origin[2];
+  r.tnear = t_min;
+  r.dir_x = ray.direction[0];
+  r.dir_y = ray.direction[1];
+  r.dir_z = ray.direction[2];
+  r.time = 0;
+  r.tfar = t_max;
+  r.mask = 0xffffffffu;
+  r.id = 0;
+  r.flags = 0;
+  return r;
+}
+
+RTCRayHit make_rayhit(const Ray& ray) {
+  RTCRayHit rh;
+  rh.ray = make_ray(ray, 0, std::numeric_limits<float>::infinity());
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  return rh;
+}
+
+// ---- ray sets -------------------------------------------------------------------------------------
+
+/// Rays and what is asked of them: the closest hit over [0, inf), or any hit over [t_min, t_max].
+struct RaySet {
+  const char* name;
+  bool any_hit;
+  std::vector<Ray> rays;
+  float t_min = 0, t_max = std::numeric_limits<float>::infinity();
+};
+
+/// Shadow rays start this far along (in units of the way to the light) from their hit point, past
+/// the box they start on.
+constexpr float shadow_t_min = 1e-4f;
+
+/// From each hit point of `primary` (hits[i]) towards a point light above and beside the scene
+/// (from -x, +y, above; the camera looks from +x, -y), over t in [shadow_t_min, 1].
+std::vector<Ray> shadow_rays(const std::vector<Ray>& primary, const std::vector<Hit>& hits, const Box3f& bounds) {
+  std::array<double, 3> light{};
+  const double factor[3] = {-0.3, 1.5, 2.0};  // the light at lo + factor * extent
+  for (int a = 0; a < 3; ++a) light[a] = bounds.lo[a] + factor[a] * (static_cast<double>(bounds.hi[a]) - bounds.lo[a]);
+  std::vector<Ray> rays;
+  for (std::size_t i = 0; i < primary.size(); ++i) {
+    if (!hits[i].hit()) continue;
+    Ray r;
+    for (int a = 0; a < 3; ++a) {
+      r.origin[a] = static_cast<float>(primary[i].origin[a] + static_cast<double>(hits[i].t) * primary[i].direction[a]);
+      r.direction[a] = static_cast<float>(light[a] - r.origin[a]);
+    }
+    if (kdspace::ray_problem(r).empty()) rays.push_back(r);
+  }
+  return rays;
 }
 
 // ---- spreading rays over threads ------------------------------------------------------------------
@@ -261,101 +445,6 @@ void for_chunks(std::size_t n, unsigned threads, const Body& body) {
   for (std::thread& t : helpers) t.join();
 }
 
-// ---- Embree ---------------------------------------------------------------------------------------
-
-/// Bytes the Embree device holds: the memory monitor adds allocations and subtracts frees.
-std::atomic<std::int64_t> embree_bytes{0};
-
-bool count_embree_bytes(void* /*user*/, ssize_t bytes, bool /*post*/) {
-  embree_bytes += static_cast<std::int64_t>(bytes);
-  return true;
-}
-
-void report_embree_error(void* /*user*/, RTCError code, const char* message) {
-  std::fprintf(stderr, "kdspace-rays-bench: Embree error %d: %s\n", static_cast<int>(code),
-               message ? message : "");
-  std::exit(1);
-}
-
-/// A ray prepared once for the user-geometry callback, as kdspace prepares it for its traversal.
-/// Embree hands the callback the RTCIntersectContext given to rtcIntersect1; this struct begins with
-/// one (standard layout), so the callback reaches the prepared ray through it (Embree's documented
-/// way of passing per-ray data to callbacks).
-struct RayContext {
-  RTCIntersectContext embree;
-  kdspace::detail::PreparedRay ray;  // the very preparation and slab test of kdspace's traversal
-
-  explicit RayContext(const Ray& r) : ray(r) { rtcInitIntersectContext(&embree); }
-};
-static_assert(std::is_standard_layout<RayContext>::value, "RayContext must start with the Embree context");
-
-using kdspace::detail::clip_to_box;
-
-void box_bounds(const RTCBoundsFunctionArguments* args) {
-  const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
-  RTCBounds* out = args->bounds_o;
-  out->lower_x = b.lo[0];
-  out->lower_y = b.lo[1];
-  out->lower_z = b.lo[2];
-  out->upper_x = b.hi[0];
-  out->upper_y = b.hi[1];
-  out->upper_z = b.hi[2];
-}
-
-/// rtcIntersect1 calls this with N = 1 and our RayContext; anything else is not what we measure.
-void box_intersect(const RTCIntersectFunctionNArguments* args) {
-  if (args->N != 1) {
-    std::fprintf(stderr,
-                 "kdspace-rays-bench: user geometry called with N = %u (only rtcIntersect1 is used)\n",
-                 args->N);
-    std::abort();
-  }
-  if (args->valid[0] == 0) return;
-  const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
-  const kdspace::detail::PreparedRay& ray = reinterpret_cast<const RayContext*>(args->context)->ray;
-  RTCRayN* rays = RTCRayHitN_RayN(args->rayhit, 1);
-  RTCHitN* hits = RTCRayHitN_HitN(args->rayhit, 1);
-  float& tfar = RTCRayN_tfar(rays, 1, 0);
-  double t_near = RTCRayN_tnear(rays, 1, 0), t_far = tfar;
-  if (!clip_to_box(b, ray, t_near, t_far)) return;
-  constexpr double largest = std::numeric_limits<float>::max();
-  const auto t = static_cast<float>(t_near > largest ? largest : t_near);
-  unsigned& hit_geometry = RTCHitN_geomID(hits, 1, 0);
-  unsigned& hit_box = RTCHitN_primID(hits, 1, 0);
-  // Here t <= tfar (rounding to float keeps the order). Closest t; at equal t the smaller box index,
-  // or any box while there is no hit yet (a hit at exactly the ray's initial tfar).
-  if (!(t < tfar || hit_geometry == RTC_INVALID_GEOMETRY_ID || args->primID < hit_box)) return;
-  tfar = t;
-  RTCHitN_Ng_x(hits, 1, 0) = 0;
-  RTCHitN_Ng_y(hits, 1, 0) = 0;
-  RTCHitN_Ng_z(hits, 1, 0) = 0;
-  RTCHitN_u(hits, 1, 0) = 0;
-  RTCHitN_v(hits, 1, 0) = 0;
-  hit_box = args->primID;
-  hit_geometry = args->geomID;
-  RTCHitN_instID(hits, 1, 0, 0) = args->context->instID[0];
-}
-
-RTCRayHit make_rayhit(const Ray& ray) {
-  RTCRayHit rh;
-  rh.ray.org_x = ray.origin[0];
-  rh.ray.org_y = ray.origin[1];
-  rh.ray.org_z = ray.origin[2];
-  rh.ray.tnear = 0;
-  rh.ray.dir_x = ray.direction[0];
-  rh.ray.dir_y = ray.direction[1];
-  rh.ray.dir_z = ray.direction[2];
-  rh.ray.time = 0;
-  rh.ray.tfar = std::numeric_limits<float>::infinity();
-  rh.ray.mask = 0xffffffffu;
-  rh.ray.id = 0;
-  rh.ray.flags = 0;
-  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
-  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  return rh;
-}
-
 // ---- contenders -----------------------------------------------------------------------------------
 
 class Contender {
@@ -365,7 +454,8 @@ class Contender {
   virtual const char* library() const = 0;
   virtual const char* quality() const { return ""; }
   virtual void build(const std::vector<Box3f>& boxes) = 0;
-  virtual std::vector<Hit> trace(const std::vector<Ray>& rays, unsigned threads) const = 0;
+  /// The hits of a ray set: for any-hit sets, the box found (any) or a miss.
+  virtual std::vector<Hit> trace(const RaySet& set, unsigned threads) const = 0;
   /// Frees what build made.
   virtual void release() = 0;
   /// Bytes held by the built structure (see the header comment).
@@ -377,11 +467,17 @@ class KdspaceContender final : public Contender {
   std::string name() const override { return "kdspace"; }
   const char* library() const override { return "kdspace"; }
   void build(const std::vector<Box3f>& boxes) override { tree_ = std::make_unique<kdspace::BoxTree>(boxes); }
-  std::vector<Hit> trace(const std::vector<Ray>& rays, unsigned threads) const override {
-    return tree_->closest_hit_batch(rays, threads);
+  std::vector<Hit> trace(const RaySet& set, unsigned threads) const override {
+    if (!set.any_hit) return tree_->closest_hit_batch(set.rays, threads);
+    std::vector<Hit> hits(set.rays.size());
+    for_chunks(set.rays.size(), threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) hits[i] = tree_->any_hit(set.rays[i], set.t_min, set.t_max);
+    });
+    return hits;
   }
   void release() override { tree_.reset(); }
   std::size_t memory_bytes() const override { return tree_->memory_bytes(); }
+  const kdspace::BoxTree& tree() const { return *tree_; }
 
  private:
   std::unique_ptr<kdspace::BoxTree> tree_;
@@ -415,7 +511,7 @@ class EmbreeContender final : public Contender {
       rtcSetGeometryUserData(geometry, const_cast<Box3f*>(boxes.data()));
       rtcSetGeometryBoundsFunction(geometry, box_bounds, nullptr);
       rtcSetGeometryIntersectFunction(geometry, box_intersect);
-      // No occluded function: only rtcIntersect1 is measured.
+      rtcSetGeometryOccludedFunction(geometry, box_occluded);
     }
     rtcSetGeometryBuildQuality(geometry, quality_);
     rtcCommitGeometry(geometry);
@@ -427,13 +523,22 @@ class EmbreeContender final : public Contender {
     if (!triangles_) bytes_ += boxes.size() * sizeof(Box3f);
   }
 
-  std::vector<Hit> trace(const std::vector<Ray>& rays, unsigned threads) const override {
-    std::vector<Hit> hits(rays.size());
+  std::vector<Hit> trace(const RaySet& set, unsigned threads) const override {
+    std::vector<Hit> hits(set.rays.size());
     const RTCScene scene = scene_;
     const bool triangles = triangles_;
-    for_chunks(rays.size(), threads, [&](std::size_t begin, std::size_t end) {
+    for_chunks(set.rays.size(), threads, [&](std::size_t begin, std::size_t end) {
       for (std::size_t i = begin; i < end; ++i) {
-        RTCRayHit rh = make_rayhit(rays[i]);
+        const Ray& ray = set.rays[i];
+        if (set.any_hit) {
+          RTCRay r = make_ray(ray, set.t_min, set.t_max);
+          RayContext context(ray);
+          rtcOccluded1(scene, &context.embree, &r);
+          // Triangles do not say which box ended the ray: box 0 stands for "some box" there.
+          if (r.tfar < 0) hits[i] = Hit{triangles ? 0 : context.occluder, 0};
+          continue;
+        }
+        RTCRayHit rh = make_rayhit(ray);
         if (triangles) {
           RTCIntersectContext context;
           rtcInitIntersectContext(&context);
@@ -441,7 +546,7 @@ class EmbreeContender final : public Contender {
           if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID)
             hits[i] = Hit{static_cast<std::int32_t>(rh.hit.primID / 12), rh.ray.tfar};
         } else {
-          RayContext context(rays[i]);  // the reciprocal direction etc., once per ray, as kdspace does
+          RayContext context(ray);  // the reciprocal direction etc., once per ray, as kdspace does
           rtcIntersect1(scene, &context.embree, &rh);
           if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID)
             hits[i] = Hit{static_cast<std::int32_t>(rh.hit.primID), rh.ray.tfar};
@@ -508,50 +613,39 @@ struct Agreement {
   std::size_t threads_differ = 0;  ///< rays whose 2-thread answer differs from the 1-thread one
 
   std::size_t real() const { return hit_miss + t_differs + threads_differ; }
-  Agreement& operator+=(const Agreement& o) {
-    rays += o.rays;
-    hit_miss += o.hit_miss;
-    t_differs += o.t_differs;
-    near_ties += o.near_ties;
-    ties += o.ties;
-    grazing += o.grazing;
-    inside += o.inside;
-    threads_differ += o.threads_differ;
-    return *this;
-  }
 };
 
-bool t_close(float a, float b) {
-  const double da = a, db = b;
-  return std::abs(da - db) <= 1e-4 * std::max(std::abs(da), std::abs(db)) + 1e-6;
-}
-
-/// Length (in t) of the part of the ray inside the box: negative when the ray misses it, by about
-/// how far in t; -inf when the ray runs parallel to a slab outside it.
-double segment_in_box(const Box3f& box, const Ray& ray) {
+/// Length (along the ray, in scene units) of the part of the ray over [t_min, t_max] inside the box:
+/// negative when the ray misses it, by about how far; -inf when the ray runs parallel to a slab
+/// outside it.
+double segment_in_box(const Box3f& box, const Ray& ray, double t_min, double t_max) {
   const kdspace::detail::PreparedRay prepared(ray);
-  double t_near = 0, t_far = std::numeric_limits<double>::infinity();
+  double t_near = t_min, t_far = t_max;
   for (int a = 0; a < 3; ++a)
     if (prepared.parallel[a] && (prepared.origin[a] < box.lo[a] || prepared.origin[a] > box.hi[a]))
       return -std::numeric_limits<double>::infinity();
   clip_to_box(box, prepared, t_near, t_far);
-  return t_far - t_near;
+  const double length = std::sqrt(static_cast<double>(ray.direction[0]) * ray.direction[0] +
+                                  static_cast<double>(ray.direction[1]) * ray.direction[1] +
+                                  static_cast<double>(ray.direction[2]) * ray.direction[2]);
+  return (t_far - t_near) * length;
 }
 
-/// Counts how `other` differs from `reference` (kdspace's hits). A difference whose closer hit only
-/// grazes its box (the ray's part inside it, or its miss distance, is at most `graze` in t: a ray along
-/// an edge or a face, where float and double arithmetic may decide either way) is counted as grazing.
-/// The first few rays of each kind of difference go to stderr with `label`: hit/miss and t differs,
-/// and near ties when `exact` (the user geometry, whose t is computed as kdspace's is; triangles
-/// differ in rounding, so coplanar faces of different boxes are expected there).
-Agreement compare(const std::vector<Hit>& reference, const std::vector<Hit>& other,
-                  const std::vector<Ray>& rays, const std::vector<Box3f>& boxes, double graze,
-                  bool exclude_inside, bool exact, const std::string& label) {
+/// Counts how `other` differs from `reference` (kdspace's hits) on a ray set. A difference whose
+/// closer hit only grazes its box (the ray's part inside it, or its miss distance, is at most `graze`
+/// long: a ray along an edge or a face, where float and double arithmetic may decide either way) is
+/// counted as grazing. For any-hit sets only hit or miss counts. The first few rays of each kind of
+/// difference go to stderr with `label`: hit/miss and t differs, and near ties when `exact` (the user
+/// geometry, whose t is computed as kdspace's is; triangles differ in rounding, so coplanar faces of
+/// different boxes are expected there).
+Agreement compare(const std::vector<Hit>& reference, const std::vector<Hit>& other, const RaySet& set,
+                  const std::vector<Box3f>& boxes, double graze, bool exclude_inside, bool exact,
+                  const std::string& label) {
   Agreement g;
   g.inside_excluded = exclude_inside;
   auto show = [&](const char* what, std::size_t count, std::size_t i) {
     if (count > 3) return;
-    const Ray& r = rays[i];
+    const Ray& r = set.rays[i];
     std::fprintf(
         stderr,
         "  %s: %s, ray %zu (origin %.9g %.9g %.9g, direction %.9g %.9g %.9g): kdspace box %d t %.9g, "
@@ -559,28 +653,37 @@ Agreement compare(const std::vector<Hit>& reference, const std::vector<Hit>& oth
         label.c_str(), what, i, r.origin[0], r.origin[1], r.origin[2], r.direction[0], r.direction[1],
         r.direction[2], reference[i].box, reference[i].t, other[i].box, other[i].t);
   };
+  auto close = [&](float a, float b) {
+    const double da = a, db = b;
+    return std::abs(da - db) <= 1e-4 * std::max(std::abs(da), std::abs(db)) + graze / 10;
+  };
   for (std::size_t i = 0; i < reference.size(); ++i) {
     const Hit& a = reference[i];
     const Hit& b = other[i];
-    const bool inside = a.hit() && a.t == 0;
+    const bool inside = !set.any_hit && a.hit() && a.t == 0;
     if (inside) ++g.inside;
     if (inside && exclude_inside) continue;
     ++g.rays;
-    if (!a.hit() && !b.hit()) continue;
+    if (a.hit() == b.hit() && (set.any_hit || !a.hit())) continue;  // same answer
     if (a.hit() && b.hit()) {
-      if (a.box == b.box && t_close(a.t, b.t)) continue;  // agree
+      if (a.box == b.box && close(a.t, b.t)) continue;  // agree
       if (a.box != b.box && a.t == b.t) {
         ++g.ties;
         continue;
       }
     }
-    const Hit& closer = a.hit() && (!b.hit() || a.t <= b.t) ? a : b;
-    const double length = segment_in_box(boxes[static_cast<std::size_t>(closer.box)], rays[i]);
+    // The box to check for grazing: the closer hit's, or for an any-hit difference the one reported
+    // (triangles do not say which, so then only kdspace's).
+    const Hit& closer = a.hit() && (!b.hit() || a.t <= b.t || set.any_hit) ? a : b;
+    const bool known = closer.hit() && !(set.any_hit && &closer == &b && !exact);
+    const double length = known ? segment_in_box(boxes[static_cast<std::size_t>(closer.box)], set.rays[i],
+                                                 set.t_min, set.t_max)
+                                : std::numeric_limits<double>::infinity();
     if (std::abs(length) <= graze) {
       ++g.grazing;
     } else if (a.hit() != b.hit()) {
       show("hit/miss", ++g.hit_miss, i);
-    } else if (!t_close(a.t, b.t)) {
+    } else if (!close(a.t, b.t)) {
       show("t differs", ++g.t_differs, i);
     } else {
       ++g.near_ties;
@@ -598,25 +701,35 @@ std::size_t count_different(const std::vector<Hit>& a, const std::vector<Hit>& b
 
 // ---- one scene ------------------------------------------------------------------------------------
 
-struct RaySet {
-  const char* name;
-  std::vector<Ray> rays;
+struct Scene {
+  std::string name;  ///< "uniform", "clustered", "mesh bunny00", "voxels bunny00"
+  std::string kind;  ///< uniform, clustered, mesh, voxels
+  std::vector<Box3f> boxes;
 };
 
 /// The measurements of one contender over the repetitions: [ray set][threads - 1].
 struct Samples {
   std::vector<double> build_s;
-  std::array<std::array<std::vector<double>, 2>, 2> mrays;
+  std::array<std::array<std::vector<double>, 2>, 3> mrays;
   std::size_t memory_bytes = 0;
-  std::array<Agreement, 2> agreement;  ///< per ray set, against kdspace (unused for kdspace)
+  std::array<Agreement, 3> agreement;  ///< per ray set, against kdspace (unused for kdspace)
 
-  double speed(int set, int threads_index) const { return median(mrays[set][threads_index]); }
-  double geometric_mean_speed() const {
+  double speed(std::size_t set, int threads_index) const { return median(mrays[set][threads_index]); }
+  double geometric_mean_speed(std::size_t sets) const {
     double log_sum = 0;
-    for (int s = 0; s < 2; ++s)
+    for (std::size_t s = 0; s < sets; ++s)
       for (int t = 0; t < 2; ++t) log_sum += std::log(std::max(speed(s, t), 1e-300));
-    return std::exp(log_sum / 4);
+    return std::exp(log_sum / static_cast<double>(2 * sets));
   }
+};
+
+/// kdspace against the peer on one scene, for the summary.
+struct SceneSummary {
+  std::string scene;
+  std::size_t boxes = 0;
+  std::string peer;
+  double build_kd = 0, build_peer = 0;
+  std::array<double, 3> kd{}, other{};  ///< 1-thread Mrays/s per ray set
 };
 
 std::string format_ratio(double kd, double other) {
@@ -638,36 +751,84 @@ Box3f scene_bounds(const std::vector<Box3f>& boxes) {
   return bounds;
 }
 
-/// Runs one (size, kind) and prints its tables and JSON lines. Returns false on a real disagreement.
-bool run_scene(const Options& o, std::size_t n, kdspace::SceneKind kind,
-               const std::vector<std::unique_ptr<Contender>>& contenders) {
-  const std::vector<Box3f> boxes = kdspace::generate_boxes(n, kind, 1);
+/// kdspace's profile on one scene (1 thread): its tree and, per ray set, the work per ray and the
+/// time per ray cold (each ray once, one call a ray) and hot (each ray traced twice in a row: the
+/// second trace finds its nodes and boxes in cache, so cold - hot is the time spent waiting for
+/// memory).
+void print_profile(const Scene& scene, const std::array<RaySet, 3>& sets) {
+  const kdspace::BoxTree tree(scene.boxes);
+  const kdspace::BoxTreeStats& t = tree.stats();
+  std::printf(
+      "\nkdspace profile: SAH cost %.2f, %zu nodes, %zu leaves (%zu empty), depth %zu, %.2f references "
+      "per box, %.1f MB.\n\n",
+      t.sah_cost, t.nodes, t.leaves, t.empty_leaves, t.depth, t.references_per_box,
+      dbl(tree.memory_bytes()) / 1e6);
+  std::printf("| rays | nodes / ray | boxes tested / ray | ns / ray cold | ns / ray hot |\n|---|---:|---:|---:|---:|\n");
+  for (const RaySet& set : sets) {
+    kdspace::RayStats stats;
+    auto trace = [&](const Ray& r) {
+      if (set.any_hit)
+        tree.any_hit(r, set.t_min, set.t_max, &stats);
+      else
+        tree.closest_hit(r, set.t_min, set.t_max, &stats);
+    };
+    const auto once = Clock::now();
+    for (const Ray& r : set.rays) trace(r);
+    const double cold = seconds_since(once) * 1e9 / dbl(set.rays.size());
+    const kdspace::RayStats per_ray = stats;
+    const auto twice = Clock::now();
+    for (const Ray& r : set.rays) {
+      trace(r);
+      trace(r);
+    }
+    const double hot = seconds_since(twice) * 1e9 / dbl(set.rays.size()) - cold;
+    std::printf("| %s | %.2f | %.2f | %.1f | %.1f |\n", set.name, per_ray.nodes_visited_per_ray(),
+                per_ray.boxes_tested_per_ray(), cold, hot);
+    std::printf(
+        "{\"bench\":\"rays-profile\",\"scene\":\"%s\",\"boxes\":%zu,\"rays\":\"%s\",\"sah_cost\":%.4f,"
+        "\"nodes_per_ray\":%.4f,\"boxes_per_ray\":%.4f,\"cold_ns\":%.2f,\"hot_ns\":%.2f}\n",
+        scene.name.c_str(), scene.boxes.size(), set.name, t.sah_cost, per_ray.nodes_visited_per_ray(),
+        per_ray.boxes_tested_per_ray(), cold, hot);
+  }
+}
+
+/// Runs one scene and prints its tables and JSON lines. Returns false on a real disagreement.
+bool run_scene(const Options& o, const Scene& scene, const std::vector<std::unique_ptr<Contender>>& contenders,
+               std::vector<SceneSummary>& summary) {
+  const std::vector<Box3f>& boxes = scene.boxes;
+  const std::size_t n = boxes.size();
   const Box3f bounds = scene_bounds(boxes);
-  // Grazing threshold in t: 1e-5 of the scene's diagonal (both ray sets have unit directions).
+  // Grazing threshold: 1e-5 of the scene's diagonal.
   const double graze = 1e-5 * std::sqrt(std::pow(bounds.hi[0] - bounds.lo[0], 2.0) +
                                         std::pow(bounds.hi[1] - bounds.lo[1], 2.0) +
                                         std::pow(bounds.hi[2] - bounds.lo[2], 2.0));
-  std::array<RaySet, 2> sets{
-      RaySet{"primary", kdspace::primary_rays(kdspace::fit_camera(bounds, dbl(o.width) / dbl(o.height)),
-                                              o.width, o.height)},
-      RaySet{"random", kdspace::random_rays(o.random_rays, bounds, 2)}};
+  std::array<RaySet, 3> sets{
+      RaySet{"primary", false,
+             kdspace::primary_rays(kdspace::fit_camera(bounds, dbl(o.width) / dbl(o.height)), o.width, o.height)},
+      RaySet{"random", false, kdspace::random_rays(o.random_rays, bounds, 2)}, RaySet{"shadow", true, {}}};
+  {
+    const kdspace::BoxTree tree(boxes);
+    sets[2].rays = shadow_rays(sets[0].rays, tree.closest_hit_batch(sets[0].rays), bounds);
+    sets[2].t_min = shadow_t_min;
+    sets[2].t_max = 1;
+  }
 
   std::vector<Samples> samples(contenders.size());
-  std::array<std::vector<Hit>, 2> reference;  // kdspace, first repetition, 1 thread
+  std::array<std::vector<Hit>, 3> reference;  // kdspace, first repetition, 1 thread
   for (int rep = 0; rep < o.reps; ++rep) {
     for (std::size_t c = 0; c < contenders.size(); ++c) {
       Contender& contender = *contenders[c];
-      std::fprintf(stderr, "  %zu %s rep %d/%d: %s\n", n, kind_name(kind), rep + 1, o.reps,
+      std::fprintf(stderr, "  %s (%zu boxes) rep %d/%d: %s\n", scene.name.c_str(), n, rep + 1, o.reps,
                    contender.name().c_str());
       const auto start = Clock::now();
       contender.build(boxes);
       samples[c].build_s.push_back(seconds_since(start));
       samples[c].memory_bytes = contender.memory_bytes();
-      for (int s = 0; s < 2; ++s) {
+      for (std::size_t s = 0; s < sets.size(); ++s) {
         std::array<std::vector<Hit>, 2> answers;
         for (unsigned threads = 1; threads <= 2; ++threads) {
           const auto trace_start = Clock::now();
-          answers[threads - 1] = contender.trace(sets[s].rays, threads);
+          answers[threads - 1] = contender.trace(sets[s], threads);
           const double seconds = seconds_since(trace_start);
           samples[c].mrays[s][threads - 1].push_back(dbl(sets[s].rays.size()) / seconds / 1e6);
         }
@@ -677,7 +838,7 @@ bool run_scene(const Options& o, std::size_t n, kdspace::SceneKind kind,
         Agreement& g = samples[c].agreement[s];
         const bool triangles = std::string(contender.library()) == "embree-tri";
         if (c != 0)
-          g = compare(reference[s], answers[0], sets[s].rays, boxes, graze, triangles, !triangles,
+          g = compare(reference[s], answers[0], sets[s], boxes, graze, triangles && !sets[s].any_hit, !triangles,
                       contender.name() + " " + sets[s].name);
         g.threads_differ = count_different(answers[0], answers[1]);
       }
@@ -689,57 +850,75 @@ bool run_scene(const Options& o, std::size_t n, kdspace::SceneKind kind,
   std::size_t peer = 0;
   for (std::size_t c = 1; c < contenders.size(); ++c)
     if (std::string(contenders[c]->library()) == "embree-user" &&
-        (peer == 0 || samples[c].geometric_mean_speed() > samples[peer].geometric_mean_speed()))
+        (peer == 0 || samples[c].geometric_mean_speed(sets.size()) > samples[peer].geometric_mean_speed(sets.size())))
       peer = c;
 
-  std::printf("\n### %zu boxes, %s; %zu primary rays (%zux%zu), %zu random rays; median of %d\n\n", n,
-              kind_name(kind), sets[0].rays.size(), o.width, o.height, sets[1].rays.size(), o.reps);
   std::printf(
-      "| contender | build s | memory MB | primary Mrays/s 1 thr | 2 thr | random Mrays/s 1 thr | 2 thr "
-      "| kdspace / contender: build s | primary 1 thr | 2 thr | random 1 thr | 2 thr |\n");
-  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+      "\n### %s: %zu boxes; %zu primary rays (%zux%zu), %zu random rays, %zu shadow rays (any hit); median of "
+      "%d\n\n",
+      scene.name.c_str(), n, sets[0].rays.size(), o.width, o.height, sets[1].rays.size(), sets[2].rays.size(),
+      o.reps);
+  std::printf(
+      "| contender | build s | memory MB | primary Mrays/s 1 thr | 2 thr | random 1 thr | 2 thr | shadow 1 thr | "
+      "2 thr | kdspace / contender: build s | primary 1 thr | 2 thr | random 1 thr | 2 thr | shadow 1 thr | 2 "
+      "thr |\n");
+  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   const Samples& kd = samples[0];
   for (std::size_t c = 0; c < contenders.size(); ++c) {
     const Samples& s = samples[c];
     std::string name = contenders[c]->name();
     if (c == peer && c != 0) name += " (peer)";
-    std::printf("| %s | %.4f | %.1f | %.3f | %.3f | %.3f | %.3f |", name.c_str(), median(s.build_s),
-                dbl(s.memory_bytes) / 1e6, s.speed(0, 0), s.speed(0, 1), s.speed(1, 0), s.speed(1, 1));
+    std::printf("| %s | %.4f | %.1f |", name.c_str(), median(s.build_s), dbl(s.memory_bytes) / 1e6);
+    for (std::size_t set = 0; set < sets.size(); ++set) std::printf(" %.3f | %.3f |", s.speed(set, 0), s.speed(set, 1));
     if (c == 0) {
-      std::printf(" - | - | - | - | - |\n");
-    } else {
-      std::printf(" %s | %s | %s | %s | %s |\n", format_ratio(median(kd.build_s), median(s.build_s)).c_str(),
-                  format_ratio(kd.speed(0, 0), s.speed(0, 0)).c_str(),
-                  format_ratio(kd.speed(0, 1), s.speed(0, 1)).c_str(),
-                  format_ratio(kd.speed(1, 0), s.speed(1, 0)).c_str(),
-                  format_ratio(kd.speed(1, 1), s.speed(1, 1)).c_str());
+      std::printf(" - | - | - | - | - | - | - |\n");
+      continue;
     }
+    std::printf(" %s |", format_ratio(median(kd.build_s), median(s.build_s)).c_str());
+    for (std::size_t set = 0; set < sets.size(); ++set)
+      std::printf(" %s | %s |", format_ratio(kd.speed(set, 0), s.speed(set, 0)).c_str(),
+                  format_ratio(kd.speed(set, 1), s.speed(set, 1)).c_str());
+    std::printf("\n");
+  }
+  if (peer != 0) {
+    SceneSummary line;
+    line.scene = scene.name;
+    line.boxes = n;
+    line.peer = contenders[peer]->name();
+    line.build_kd = median(kd.build_s);
+    line.build_peer = median(samples[peer].build_s);
+    for (std::size_t set = 0; set < sets.size(); ++set) {
+      line.kd[set] = kd.speed(set, 0);
+      line.other[set] = samples[peer].speed(set, 0);
+    }
+    summary.push_back(line);
   }
 
+  print_profile(scene, sets);
+
   std::printf(
-      "\nAgreement with kdspace (first repetition, 1 thread). t differs: |dt| > 1e-4 max(t) + 1e-6; "
+      "\nAgreement with kdspace (first repetition, 1 thread). t differs: |dt| > 1e-4 max(t) + 1e-6 diagonal; "
       "near ties: other box at a close but unequal t (float rounding); ties: other box at equal t; "
       "grazing: the closer hit's path through its box (or miss) <= 1e-5 of the scene diagonal; "
-      "inside: kdspace hit at t = 0, left out of the other columns for triangles.\n\n");
+      "inside: kdspace hit at t = 0, left out of the other columns for triangles; shadow rays: hit or miss "
+      "only.\n\n");
   std::printf(
       "| contender | rays | compared | hit/miss | t differs | near ties | ties (equal t) | grazing | "
       "inside | 2 thr != 1 thr |\n");
   std::printf("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   bool agree = true;
   for (std::size_t c = 0; c < contenders.size(); ++c) {
-    for (int set = 0; set < 2; ++set) {
+    for (std::size_t set = 0; set < sets.size(); ++set) {
       const Agreement& g = samples[c].agreement[set];
       if (c == 0) {
-        std::printf(
-            "| %s | %s | - | - | - | - | - | - | %zu | %zu |\n", contenders[c]->name().c_str(),
-            sets[set].name,
-            compare(reference[set], reference[set], sets[set].rays, boxes, graze, false, true, "").inside,
-            g.threads_differ);
+        std::size_t inside = 0;
+        for (const Hit& h : reference[set]) inside += !sets[set].any_hit && h.hit() && h.t == 0 ? 1 : 0;
+        std::printf("| %s | %s | - | - | - | - | - | - | %zu | %zu |\n", contenders[c]->name().c_str(),
+                    sets[set].name, inside, g.threads_differ);
       } else {
         std::printf("| %s | %s | %zu | %zu | %zu | %zu | %zu | %zu | %zu%s | %zu |\n",
-                    contenders[c]->name().c_str(), sets[set].name, g.rays, g.hit_miss, g.t_differs,
-                    g.near_ties, g.ties, g.grazing, g.inside, g.inside_excluded ? " (left out)" : "",
-                    g.threads_differ);
+                    contenders[c]->name().c_str(), sets[set].name, g.rays, g.hit_miss, g.t_differs, g.near_ties,
+                    g.ties, g.grazing, g.inside, g.inside_excluded ? " (left out)" : "", g.threads_differ);
       }
       const bool user = std::string(contenders[c]->library()) == "embree-user";
       if (g.threads_differ > 0 || (user && g.real() > 0)) agree = false;
@@ -751,15 +930,16 @@ bool run_scene(const Options& o, std::size_t n, kdspace::SceneKind kind,
   std::printf("\n");
   for (std::size_t c = 0; c < contenders.size(); ++c) {
     const Samples& s = samples[c];
-    for (int set = 0; set < 2; ++set)
+    for (std::size_t set = 0; set < sets.size(); ++set)
       for (int t = 0; t < 2; ++t) {
         const Agreement& g = s.agreement[set];
         std::printf(
             "{\"bench\":\"rays\",\"library\":\"%s\",\"build_quality\":\"%s\",\"boxes\":%zu,\"scene\":\"%s\","
-            "\"rays\":\"%s\",\"ray_count\":%zu,\"threads\":%d,\"mrays_s\":%.4f,\"build_s\":%.5f,"
-            "\"memory_bytes\":%zu,\"reps\":%d",
-            contenders[c]->library(), contenders[c]->quality(), n, kind_name(kind), sets[set].name,
-            sets[set].rays.size(), t + 1, s.speed(set, t), median(s.build_s), s.memory_bytes, o.reps);
+            "\"scene_kind\":\"%s\",\"rays\":\"%s\",\"ray_count\":%zu,\"threads\":%d,\"mrays_s\":%.4f,"
+            "\"build_s\":%.5f,\"memory_bytes\":%zu,\"reps\":%d",
+            contenders[c]->library(), contenders[c]->quality(), n, scene.name.c_str(), scene.kind.c_str(),
+            sets[set].name, sets[set].rays.size(), t + 1, s.speed(set, t), median(s.build_s), s.memory_bytes,
+            o.reps);
         if (c != 0)
           std::printf(
               ",\"peer\":%s,\"hit_miss\":%zu,\"t_differs\":%zu,\"near_ties\":%zu,\"ties\":%zu,"
@@ -773,10 +953,59 @@ bool run_scene(const Options& o, std::size_t n, kdspace::SceneKind kind,
   return agree;
 }
 
+/// The summary: kdspace against the peer on every scene, 1 thread.
+void print_summary(const std::vector<SceneSummary>& summary) {
+  std::printf(
+      "\n## Summary: kdspace against the peer (the faster Embree user geometry), 1 thread\n\n"
+      "Build: kdspace s / peer s (lower is better). Speed: kdspace Mrays/s / peer Mrays/s (above 1: "
+      "kdspace faster).\n\n");
+  std::printf(
+      "| scene | boxes | build s kdspace / peer | ratio | primary Mrays/s kdspace / peer | ratio | random "
+      "Mrays/s kdspace / peer | ratio | shadow Mrays/s kdspace / peer | ratio |\n");
+  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  for (const SceneSummary& s : summary) {
+    std::printf("| %s | %zu | %.4f / %.4f | %s |", s.scene.c_str(), s.boxes, s.build_kd, s.build_peer,
+                format_ratio(s.build_kd, s.build_peer).c_str());
+    for (std::size_t set = 0; set < 3; ++set)
+      std::printf(" %.2f / %.2f | %s |", s.kd[set], s.other[set], format_ratio(s.kd[set], s.other[set]).c_str());
+    std::printf("\n");
+  }
+  for (const SceneSummary& s : summary)
+    std::printf(
+        "{\"bench\":\"rays-summary\",\"scene\":\"%s\",\"boxes\":%zu,\"peer\":\"%s\",\"build_ratio\":%.4f,"
+        "\"primary_ratio\":%.4f,\"random_ratio\":%.4f,\"shadow_ratio\":%.4f}\n",
+        s.scene.c_str(), s.boxes, s.peer.c_str(), s.build_kd / s.build_peer, s.kd[0] / s.other[0],
+        s.kd[1] / s.other[1], s.kd[2] / s.other[2]);
+}
+
+/// The scenes to run: the synthetic ones, then per real mesh its triangle boxes and its voxels.
+std::vector<Scene> make_scenes(const Options& o) {
+  std::vector<Scene> scenes;
+  if (o.synthetic)
+    for (const std::size_t n : o.sizes)
+      for (const kdspace::SceneKind kind : o.kinds)
+        scenes.push_back(Scene{kind_name(kind), kind_name(kind), kdspace::generate_boxes(n, kind, 1)});
+  if (o.real_dir.empty()) return scenes;
+  for (const kdspace::bench::Mesh& mesh : kdspace::bench::read_real_meshes(o.real_dir)) {
+    if (mesh.triangles.empty()) continue;  // a scan: points only
+    scenes.push_back(Scene{"mesh " + mesh.name, "mesh", kdspace::bench::triangle_boxes(mesh)});
+    if (o.voxel_resolution > 0)
+      scenes.push_back(Scene{"voxels " + mesh.name, "voxels", kdspace::bench::surface_voxels(mesh, o.voxel_resolution)});
+  }
+  return scenes;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const Options o = parse(argc, argv);
+  std::vector<Scene> scenes;
+  try {
+    scenes = make_scenes(o);
+  } catch (const kdspace::Error& e) {
+    std::fprintf(stderr, "kdspace-rays-bench: %s\n", e.what());
+    return 1;
+  }
 
   // One thread for Embree's builds, like kdspace's default build.
   RTCDevice device = rtcNewDevice("threads=1");
@@ -794,10 +1023,10 @@ int main(int argc, char** argv) {
               rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_MINOR),
               rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_PATCH));
   std::printf(
-      "kdspace: BoxTree default build (sah_nlogn, 1 thread), closest_hit_batch. Embree: device \"threads=1\" "
-      "(builds on 1 thread; tasking %s; backface culling %s), rtcIntersect1 per ray; user geometry = boxes "
-      "with kdspace's slab test in the callback; tri = 12 triangles per box. Build quality in the name. "
-      "2 thr: two threads sharing the rays in chunks of 256. hardware threads: %u.\n",
+      "kdspace: BoxTree default build (sah_nlogn, 1 thread), closest_hit_batch, any_hit per shadow ray. Embree: "
+      "device \"threads=1\" (builds on 1 thread; tasking %s; backface culling %s), rtcIntersect1 / rtcOccluded1 "
+      "per ray; user geometry = boxes with kdspace's slab test in the callbacks; tri = 12 triangles per box. "
+      "Build quality in the name. 2 thr: two threads sharing the rays in chunks of 256. hardware threads: %u.\n",
       tasking == 0   ? "internal"
       : tasking == 1 ? "TBB"
       : tasking == 2 ? "PPL"
@@ -813,9 +1042,10 @@ int main(int argc, char** argv) {
       contenders.push_back(std::make_unique<EmbreeContender>(device, false, q, o.robust));
     for (const RTCBuildQuality q : o.triangle_qualities)
       contenders.push_back(std::make_unique<EmbreeContender>(device, true, q, o.robust));
-    for (const std::size_t n : o.sizes)
-      for (const kdspace::SceneKind kind : o.kinds)
-        if (!run_scene(o, n, kind, contenders)) agree = false;
+    std::vector<SceneSummary> summary;
+    for (const Scene& scene : scenes)
+      if (!run_scene(o, scene, contenders, summary)) agree = false;
+    print_summary(summary);
   }
   rtcReleaseDevice(device);
   return agree ? 0 : 1;

@@ -9,7 +9,9 @@
 #
 # usage: bench/run_all.sh [kdspace-bench options, e.g. --quick or --workload uniform3d]
 # environment: BUILD_DIR (default build/bench), RESULTS_DIR (default bench/results), PLOT_DIR
-#              (default docs), RAYS_BENCH_ARGS (options for kdspace-rays-bench), FOREST_BENCH_ARGS
+#              (default docs), RAYS_BENCH_ARGS (options for kdspace-rays-bench), REAL_DATA_DIR (the
+#              real meshes for the rays bench; default BUILD_DIR/real_data, filled by
+#              bench/real_data/fetch.sh), FOREST_BENCH_ARGS
 #              (options for kdspace-forest-bench), IMAGES_DIR (the photographs for the forest
 #              bench; default BUILD_DIR/photos, filled from Debian's python3-skimage package)
 #
@@ -55,8 +57,17 @@ run_bench() {
 run_bench points "$points_bench" "$@"
 
 if [ -x "$rays_bench" ]; then
+  # The real scenes (triangle boxes and voxels of real meshes): bench/real_data/fetch.sh downloads
+  # the Debian packages that hold the meshes (not installed) into REAL_DATA_DIR.
+  real=${REAL_DATA_DIR:-$build/real_data}
+  real_args=()
+  if [ -f "$real/real_data.txt" ] || "$here/real_data/fetch.sh" "$real"; then
+    real_args=(--real "$real")
+  else
+    echo "run_all.sh: bench/real_data/fetch.sh $real failed; the rays bench runs without real scenes" >&2
+  fi
   # shellcheck disable=SC2086  # RAYS_BENCH_ARGS is a list of options
-  run_bench rays "$rays_bench" ${RAYS_BENCH_ARGS:-}
+  run_bench rays "$rays_bench" "${real_args[@]}" ${RAYS_BENCH_ARGS:-}
 else
   echo "run_all.sh: $rays_bench not built; no ray results this run" >&2
   if [ -f "$results/rays.jsonl" ]; then
