@@ -17,6 +17,7 @@
 #include <cstring>
 #include <limits>
 #include <type_traits>
+#include <utility>
 
 #include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/ray.hpp"
@@ -61,17 +62,7 @@ inline float next_up(float f) {
   return f;
 }
 
-/// The largest Real <= t (t a double), and the smallest Real >= t; +-inf stay.
-template <class Real>
-inline Real round_down(double t) {
-  if constexpr (std::is_same_v<Real, double>) {
-    return t;
-  } else {
-    if (!(std::abs(t) <= std::numeric_limits<float>::max())) return t > 0 ? std::numeric_limits<float>::max() : -std::numeric_limits<float>::infinity();
-    const auto f = static_cast<float>(t);
-    return f > t ? -next_up(-f) : f;
-  }
-}
+/// The smallest Real >= t (t a double); +-inf stay.
 template <class Real>
 inline Real round_up(double t) {
   if constexpr (std::is_same_v<Real, double>) {
@@ -120,6 +111,24 @@ struct TraversalRay {
     }
   }
 };
+
+/// Narrows [t_lo, t_hi] to the part of the ray inside the closed box, widened (a superset of what
+/// the double slab test finds); false when that part is empty.
+template <class Real>
+inline bool clip_widened(const Box3f& b, const TraversalRay<Real>& r, Real& t_lo, Real& t_hi) {
+  for (int a = 0; a < 3; ++a) {
+    const Real lo = b.lo[a], hi = b.hi[a];
+    if (std::isinf(r.inverse[a])) {  // parallel: inside the slab or never (exact comparisons)
+      if (r.origin[a] < lo || r.origin[a] > hi) return false;
+      continue;
+    }
+    Real t0 = (lo - r.origin[a]) * r.inverse[a], t1 = (hi - r.origin[a]) * r.inverse[a];
+    if (r.negative[a]) std::swap(t0, t1);
+    t_lo = std::max(t_lo, widen_down(t0));
+    t_hi = std::min(t_hi, widen_up(t1));
+  }
+  return t_lo <= t_hi;
+}
 
 /// Lanes of `block` whose box the ray may hit within [t_lo, t_hi]: bit l for lane l. A filter: it
 /// lets through every box the double slab test accepts over that range (and a few more). In double

@@ -31,6 +31,7 @@
 #include <utility>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -86,17 +87,16 @@ void check_ray(const Ray& ray) {
 
 template <class Real, bool AnyHit>
 Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) const {
-  using detail::round_down;
   using detail::round_up;
   ++stats.rays;
   Hit none;
   if (boxes_.empty()) return none;
-  const PreparedRay exact(ray);
-
-  double scene_entry = t_min, scene_exit = t_max;
-  if (!clip_to_box(bounds_, exact, scene_entry, scene_exit)) return none;
   const detail::TraversalRay<Real> r(ray);
-  Real t_entry = round_down<Real>(scene_entry), t_exit = round_up<Real>(scene_exit);
+  Real t_entry = static_cast<Real>(t_min), t_exit = static_cast<Real>(t_max);
+  if (!detail::clip_widened(bounds_, r, t_entry, t_exit)) return none;
+  // The ray in double for the exact box tests, made when the first box needs one (most rays that
+  // miss everything never do).
+  std::optional<PreparedRay> exact;
 
   double best_t = t_max;
   std::int32_t best_box = Hit::none;
@@ -129,7 +129,8 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
             const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
             lanes &= lanes - 1;
             double t_near = t_min, t_far = best_t;
-            if (!clip_to_box(box_in_lane(*blocks, lane), exact, t_near, t_far)) continue;
+            if (!exact) exact.emplace(ray);
+            if (!clip_to_box(box_in_lane(*blocks, lane), *exact, t_near, t_far)) continue;
             const auto box = static_cast<std::int32_t>(ids[lane]);
             if constexpr (AnyHit) {
               return Hit{box, to_float_t(t_near)};
