@@ -89,10 +89,13 @@ struct BoxBuildParams {
   /// overlap everywhere would otherwise be copied into both children at every level, 2^depth times.
   float max_references_per_box = 16;
   /// sah_nlogn only: a node holding more than this many boxes places its plane by min-max binning
-  /// (128 equal bins per axis, one pass over its boxes, no sorting) instead of the exact event sweep,
-  /// which takes over below it. 0 = the exact sweep everywhere, and then the tree is exactly the one
-  /// `sah` builds.
-  std::size_t binning_threshold = 256;
+  /// (128 equal bins per axis in one pass over its boxes, then the exact sweep over the box faces in
+  /// the two bins around the best boundary) instead of the exact event sweep of W&H, which takes
+  /// over below it. 0 = the exact sweep everywhere, and then the tree is exactly the one `sah`
+  /// builds. Measured (instruction counts, 1e5 uniform and clustered boxes and a 75k-triangle scan):
+  /// binning down to 64 boxes builds 1.5-2.5x faster than the exact sweep everywhere, for trees
+  /// within 0.1-0.4% of its SAH cost; the exact sweep pays only in the small nodes below that.
+  std::size_t binning_threshold = 64;
   /// Threads for the build; 0 = all hardware threads. The tree does not depend on it.
   unsigned threads = 1;
 };
