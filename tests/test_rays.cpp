@@ -621,3 +621,60 @@ TEST_CASE("rays: boxes near the float range and far from the origin", "[rays]") 
   rays.push_back(Ray{{-3e38f, 0, 0}, {-1, 0, 0}});
   check_scene(boxes, rays);
 }
+
+TEST_CASE("rays: the float traversal gives the double traversal's answers, bit for bit", "[rays]") {
+  // The same boxes traced twice: as they are (float traversal) and with one more box far beyond
+  // 2^62, which puts the scene out of the float range (double traversal). The closest hits must be
+  // equal in box and t; any hits agree on hit or miss (the two traversals may meet the boxes in a
+  // different order).
+  Rng rng(21);
+  const std::vector<std::vector<Box3f>> scenes{kdspace::generate_boxes(3000, kdspace::SceneKind::clustered, 21),
+                                               integer_boxes(600, rng), flat_boxes(600, rng),
+                                               mixed_scale_boxes(600, rng), overlapping_boxes(300, rng)};
+  for (std::size_t s = 0; s < scenes.size(); ++s) {
+    INFO("scene " << s);
+    const std::vector<Box3f>& boxes = scenes[s];
+    std::vector<Box3f> with_far = boxes;
+    with_far.push_back(box_of(1e25f, 1e25f, 1e25f, 2e25f, 2e25f, 2e25f));
+    const BoxTree in_float(boxes), in_double(with_far);
+    const Box3f bounds = bounds_of(boxes);
+    std::vector<Ray> rays = random_rays(1500, bounds, rng);
+    const std::vector<Ray> lattice = lattice_rays(500, 0, 12, rng);
+    rays.insert(rays.end(), lattice.begin(), lattice.end());
+    // Nearly parallel rays: components of 1e-7 .. 1e-19 are traced in float, 1e-25 in double.
+    for (const float tiny : {1e-7f, 1e-12f, 1e-19f, 1e-25f})
+      for (int k = 0; k < 100; ++k) {
+        Ray r = random_rays(1, bounds, rng)[0];
+        r.direction[static_cast<std::size_t>(k % 3)] = (k % 2 ? tiny : -tiny);
+        rays.push_back(r);
+      }
+    std::size_t failures = 0;
+    for (std::size_t i = 0; i < rays.size() && failures < 5; ++i) {
+      const Hit a = in_float.closest_hit(rays[i]), b = in_double.closest_hit(rays[i]);
+      if (b.box == static_cast<std::int32_t>(boxes.size())) continue;  // the far box
+      if (a.box != b.box || (a.hit() && a.t != b.t)) {
+        ++failures;
+        FAIL_CHECK("ray " << i << " " << describe(rays[i]) << ": float traversal box " << a.box << " t " << a.t
+                          << ", double traversal box " << b.box << " t " << b.t);
+      }
+      const Hit any_a = in_float.any_hit(rays[i]), any_b = in_double.any_hit(rays[i]);
+      if (any_b.box != static_cast<std::int32_t>(boxes.size())) CHECK(any_a.hit() == any_b.hit());
+    }
+  }
+}
+
+TEST_CASE("rays: nearly parallel rays and rays with subnormal direction components", "[rays]") {
+  Rng rng(23);
+  const std::vector<Box3f> boxes = mixed_scale_boxes(800, rng);
+  const Box3f bounds = bounds_of(boxes);
+  std::vector<Ray> rays;
+  for (const float tiny : {1e-3f, 1e-9f, 1e-18f, 0x1p-64f, 0x1p-65f, 1e-30f, 1e-40f, 1e-45f})
+    for (int k = 0; k < 60; ++k) {
+      Ray r = random_rays(1, bounds, rng)[0];
+      for (int a = 0; a < 3; ++a)
+        if (a != k % 3 && (k / 3) % 2 == 0) r.direction[static_cast<std::size_t>(a)] = (a % 2 ? tiny : -tiny);
+      if (k % 5 == 0) r.direction[static_cast<std::size_t>(k % 3)] = tiny;
+      rays.push_back(r);
+    }
+  check_scene(boxes, rays);
+}
