@@ -1,5 +1,5 @@
 # gnuplot script of bench/plot.sh, which writes the data files and the plot commands (the file named
-# by `series`) and passes out_points and out_rays, the pictures to make.
+# by `series`) and passes out_points, the picture to make.
 load series
 
 set terminal pngcairo size 1400,560 enhanced font "DejaVu Sans,11"
@@ -23,24 +23,3 @@ set title "clustered workloads (Gaussian blobs)"
 eval plot_points_clustered
 unset multiplot
 set output
-
-# ---- (b) rays Mrays/s against the number of boxes ------------------------------------------------------
-if (has_rays) {
-  set output out_rays
-  set multiplot layout 1,2 title "kdspace-rays-bench: Mrays/s (log) against number of boxes (log), 1 thread".(strlen(rays_scenes) > 0 ? " — scenes: ".rays_scenes : "") font ",13"
-  set logscale x 10
-  set autoscale x
-  set logscale y 10
-  set bmargin 4
-  set format x "10^{%L}"
-  set format y "%g"
-  set xtics auto
-  set xlabel "boxes" offset 0,0
-  set ylabel "Mrays / s"
-  set title "primary (camera) rays"
-  eval plot_rays_primary
-  set title "random rays"
-  eval plot_rays_random
-  unset multiplot
-  set output
-}

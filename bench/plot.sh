@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Plots the benchmark results: docs/bench_points.png (exact 10-NN queries/s against dimension, one
-# line per library, uniform and clustered workloads side by side) and docs/bench_rays.png (Mrays/s
-# against the number of boxes, one line per library, primary and random rays side by side, 1 thread)
+# line per library, uniform and clustered workloads side by side), docs/bench_rays.png (per scene,
+# kdspace's trace speed and build time against Embree user geometry's, 1 thread, with the targets)
 # and docs/bench_forest.png (approximate 10-NN: queries/s against recall@10, one panel per data set,
 # one line per library and number of trees).
 #
@@ -11,7 +11,7 @@
 # kdspace-bench and kdspace-rays-bench) and RESULTS_DIR/forest.jsonl (kdspace-forest-bench);
 # python3 (standard library only) turns them into .dat files
 # and the plot commands, bench/plot.gp draws them with gnuplot. Without rays.jsonl (or with no
-# 1-thread rays lines in it) only the points picture is made.
+# summary lines in it) the rays picture is not made.
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")" && pwd)
@@ -108,36 +108,12 @@ def short(n):
 tics = ", ".join(f'"{d}\\n(n {"/".join(short(n) for n in sorted(ns))})" {d}' for d, ns in sorted(n_by_dim.items()))
 commands.append(f"points_xtics = {gp_quote('set xtics (' + tics + ')' if tics else 'set xtics')}")
 
-# ---- (b) rays: Mrays/s against the number of boxes, 1 thread ------------------------------------------
-rays = [r for r in read_jsonl(os.path.join(results, "rays.jsonl"), "rays")
-        if r.get("threads") == 1 and "mrays_s" in r and "boxes" in r and "library" in r]
-# One line per contender (library and, where given, its build quality) and scene.
-def contender(r):
-    quality = str(r.get("build_quality", "") or "")
-    return r["library"] + (f" ({quality})" if quality else "")
-
-scenes = sorted({str(r.get("scene", "")) for r in rays})
-ray_libs = sorted({contender(r) for r in rays})
-for kind in ("primary", "random"):
-    series = []
-    for library in ray_libs:
-        for s, scene in enumerate(scenes):
-            values = {int(r["boxes"]): float(r["mrays_s"]) for r in rays
-                      if contender(r) == library and r.get("rays") == kind and str(r.get("scene", "")) == scene}
-            if values:
-                title = library if len(scenes) == 1 else f"{library}, {scene}"
-                name = f"rays_{kind}_{ray_libs.index(library)}_{s}"
-                series.append((write_series(name, values), title, library, s + 1))
-    commands.append(f"plot_rays_{kind} = {gp_quote(plot_command(series, ray_libs))}")
-commands.append(f"has_rays = {1 if rays else 0}")
-commands.append(f"rays_scenes = {gp_quote(', '.join(scenes))}")
-
 with open(os.path.join(work, "series.gp"), "w") as f:
     f.write("\n".join(commands) + "\n")
-print(f"plot.sh: {len(knn)} 10-NN measurements ({', '.join(lib_order)}), {len(rays)} 1-thread ray measurements")
+print(f"plot.sh: {len(knn)} 10-NN measurements ({', '.join(lib_order)})")
 PYTHON
 
-gnuplot -e "series='$work/series.gp'; out_points='$out/bench_points.png'; out_rays='$out/bench_rays.png'" "$here/plot.gp"
+gnuplot -e "series='$work/series.gp'; out_points='$out/bench_points.png'" "$here/plot.gp"
 echo "plot.sh: wrote $out/bench_points.png"
 
 # ---- (c) the forest: queries/s against recall@10, a complete gnuplot script made here -----------------
@@ -180,8 +156,41 @@ open(os.path.join(work, "forest.gp"), "w").write("\n".join(script) + "\n")
 PYTHON
   gnuplot "$work/forest.gp" && echo "plot.sh: wrote $out/bench_forest.png"
 fi
-if grep -q '^has_rays = 1' "$work/series.gp"; then
-  echo "plot.sh: wrote $out/bench_rays.png"
+# ---- (b) rays: kdspace against the peer on every scene, a complete gnuplot script made here ------------
+if [ -f "$results/rays.jsonl" ] && grep -q '"bench":"rays-summary"' "$results/rays.jsonl"; then
+  python3 - "$results/rays.jsonl" "$work" "$out/bench_rays.png" <<'PYTHON'
+import json, os, sys
+path, work, png = sys.argv[1:4]
+rows = [json.loads(l) for l in open(path) if l.startswith("{")]
+rows = [r for r in rows if r.get("bench") == "rays-summary"]
+dat = os.path.join(work, "rays_summary.dat")
+with open(dat, "w") as f:
+    for i, r in enumerate(rows):
+        label = f"{r['scene']} ({r['boxes']:,})"
+        f.write(f"{i} {r['primary_ratio']} {r['random_ratio']} {r['shadow_ratio']} {r['build_ratio']} \"{label}\"\n")
+n = len(rows)
+script = [f"set terminal pngcairo size {max(1000, 60 * n + 300)},900 noenhanced font 'DejaVu Sans,10'",
+          f"set output '{png}'",
+          "set grid ytics lc rgb '#dddddd'",
+          "set key top left box opaque",
+          f"set xrange [-0.7:{n - 0.3}]",
+          "set xtics rotate by -45 left font ',9'",
+          "set logscale y 2",
+          "set multiplot layout 2,1 title 'kdspace-rays-bench: kdspace against Embree 3 user geometry (the faster build quality), 1 thread' font ',13'",
+          "set ylabel 'kdspace Mrays/s / Embree Mrays/s'",
+          "set title 'trace speed (above 1: kdspace faster; target 1.2)'",
+          f"plot 1.2 with lines dt 2 lc rgb '#333333' title 'target 1.2', 1 with lines lc rgb '#999999' notitle, "
+          f"'{dat}' using 1:2:xtic(6) with points pt 7 ps 1.3 lc rgb '#d62728' title 'primary (closest hit)', "
+          f"'' using 1:3 with points pt 5 ps 1.2 lc rgb '#1f77b4' title 'random (closest hit)', "
+          f"'' using 1:4 with points pt 9 ps 1.4 lc rgb '#2ca02c' title 'shadow (any hit)'",
+          "set ylabel 'kdspace build s / Embree build s'",
+          "set title 'build time (below 3: within the target)'",
+          f"plot 3 with lines dt 2 lc rgb '#333333' title 'target 3', 1 with lines lc rgb '#999999' notitle, "
+          f"'{dat}' using 1:5:xtic(6) with points pt 7 ps 1.3 lc rgb '#9467bd' title 'SAH build (sah_nlogn, 1 thread)'",
+          "unset multiplot"]
+open(os.path.join(work, "rays.gp"), "w").write("\n".join(script) + "\n")
+PYTHON
+  gnuplot "$work/rays.gp" && echo "plot.sh: wrote $out/bench_rays.png"
 else
-  echo "plot.sh: no 1-thread rays results in $results/rays.jsonl; bench_rays.png not made"
+  echo "plot.sh: no rays summary in $results/rays.jsonl; bench_rays.png not made"
 fi
