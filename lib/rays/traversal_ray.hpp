@@ -52,6 +52,12 @@ inline Real widen_up(Real t) {
   return t + (std::abs(t) * Widening<Real>::relative + Widening<Real>::absolute);
 }
 
+/// t rounded to float; a hit beyond the float range reports the largest finite float.
+inline float to_float_t(double t) {
+  constexpr double largest = std::numeric_limits<float>::max();
+  return static_cast<float>(t > largest ? largest : t);
+}
+
 /// The smallest float above the finite f.
 inline float next_up(float f) {
   if (f == 0) return std::numeric_limits<float>::denorm_min();
@@ -128,6 +134,16 @@ inline bool clip_widened(const Box3f& b, const TraversalRay<Real>& r, Real& t_lo
     t_hi = std::min(t_hi, widen_up(t1));
   }
   return t_lo <= t_hi;
+}
+
+/// The box in `lane` of a leaf block.
+inline Box3f box_in_lane(const LeafBlock& block, unsigned lane) {
+  Box3f b;
+  for (int a = 0; a < 3; ++a) {
+    b.lo[a] = block.plane[a][lane];
+    b.hi[a] = block.plane[3 + a][lane];
+  }
+  return b;
 }
 
 /// Lanes of `block` whose box the ray may hit within [t_lo, t_hi]: bit l for lane l. A filter: it

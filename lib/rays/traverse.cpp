@@ -48,28 +48,12 @@ namespace {
 using detail::clip_to_box;
 using detail::PreparedRay;
 
-/// t rounded to float; a hit beyond the float range reports the largest finite float.
-inline float to_float_t(double t) {
-  constexpr double largest = std::numeric_limits<float>::max();
-  return static_cast<float>(t > largest ? largest : t);
-}
-
 /// A pending far child and the ray's interval in its cell: 12 bytes in float.
 template <class Real>
 struct StackEntry {
   std::uint32_t node;
   Real t_entry, t_exit;
 };
-
-/// The box in `lane` of a leaf block.
-inline Box3f box_in_lane(const LeafBlock& block, unsigned lane) {
-  Box3f b;
-  for (int a = 0; a < 3; ++a) {
-    b.lo[a] = block.plane[a][lane];
-    b.hi[a] = block.plane[3 + a][lane];
-  }
-  return b;
-}
 
 void check_range(float t_min, float t_max) {
   if (!std::isfinite(t_min)) throw Error("t_min must be finite, got " + std::to_string(t_min));
@@ -140,10 +124,10 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
             lanes &= lanes - 1;
             double t_near = t_min, t_far = best_t;
             if (!exact) exact.emplace(ray);
-            if (!clip_to_box(box_in_lane(*blocks, lane), *exact, t_near, t_far)) continue;
+            if (!clip_to_box(detail::box_in_lane(*blocks, lane), *exact, t_near, t_far)) continue;
             const auto box = static_cast<std::int32_t>(ids[lane]);
             if constexpr (AnyHit) {
-              return Hit{box, to_float_t(t_near)};
+              return Hit{box, detail::to_float_t(t_near)};
             } else {
               if (t_near < best_t || best_box == Hit::none || box < best_box) {
                 best_t = t_near;
@@ -179,7 +163,7 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
     }
   }
   if (best_box == Hit::none) return none;
-  return Hit{best_box, to_float_t(best_t)};
+  return Hit{best_box, detail::to_float_t(best_t)};
 }
 
 template <bool AnyHit>
@@ -222,7 +206,17 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, unsigned t
   const float inf = std::numeric_limits<float>::infinity();
   detail::parallel_for(n, workers, 256, [&](std::size_t begin, std::size_t end, unsigned worker) {
     RayStats local;
-    for (std::size_t i = begin; i < end; ++i) hits[i] = trace_any_precision<AnyHit>(rays[i], 0.0f, inf, local);
+    // Four rays that run the same way (coherent rays: a camera's neighbouring pixels) go through the
+    // tree together; the others one by one. Both give the same hits and statistics.
+    std::size_t i = begin;
+    for (; i + 4 <= end; i += 4) {
+      if (packet_fits(rays + i)) {
+        trace_packet<AnyHit>(rays + i, hits.data() + i, local);
+      } else {
+        for (std::size_t k = i; k < i + 4; ++k) hits[k] = trace_any_precision<AnyHit>(rays[k], 0.0f, inf, local);
+      }
+    }
+    for (; i < end; ++i) hits[i] = trace_any_precision<AnyHit>(rays[i], 0.0f, inf, local);
     per_worker[worker] += local;
   });
   if (stats)

@@ -231,6 +231,11 @@ class BoxTree {
   Hit trace_any_precision(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
   template <bool AnyHit>
   std::vector<Hit> trace_batch(const Ray* rays, std::size_t n, unsigned threads, RayStats* stats) const;
+  /// True when rays[0 .. 4) can be traced together (packet_rays in trace_packet.cpp).
+  bool packet_fits(const Ray* rays) const;
+  /// Traces rays[0 .. 4) together over [0, inf): the hits and statistics of four single traces.
+  template <bool AnyHit>
+  void trace_packet(const Ray* rays, Hit* hits, RayStats& stats) const;
   void compute_stats();
 
   std::vector<Box3f> boxes_;
