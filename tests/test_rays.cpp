@@ -537,6 +537,33 @@ TEST_CASE("rays: batches give the hits and stats of single rays on 1, 2 and 4 th
   }
 }
 
+TEST_CASE("rays: batches over a range give the hits of single rays over it", "[rays]") {
+  Rng rng(25);
+  const std::vector<Box3f> boxes = kdspace::generate_boxes(2000, kdspace::SceneKind::clustered, 25);
+  const Box3f bounds = bounds_of(boxes);
+  std::vector<Ray> rays = random_rays(1000, bounds, rng);
+  const std::vector<Ray> primary = kdspace::primary_rays(kdspace::fit_camera(bounds, 1.0), 40, 40);
+  rays.insert(rays.end(), primary.begin(), primary.end());
+  const BoxTree tree(boxes);
+  for (const kdspace::RayRange range : {kdspace::RayRange{0.5f, 1.5f}, kdspace::RayRange{-1, 0.25f},
+                                        kdspace::RayRange{1, 1}}) {
+    RayStats batch_stats, single_stats;
+    const std::vector<Hit> closest = tree.closest_hit_batch(rays, range, 2, &batch_stats);
+    const std::vector<Hit> any = tree.any_hit_batch(rays, range);
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      const Hit c = tree.closest_hit(rays[i], range.t_min, range.t_max, &single_stats);
+      REQUIRE(closest[i].box == c.box);
+      REQUIRE(closest[i].t == c.t);
+      REQUIRE(any[i].box == tree.any_hit(rays[i], range.t_min, range.t_max).box);
+      if (c.hit()) CHECK((c.t >= range.t_min && c.t <= range.t_max));
+    }
+    CHECK(batch_stats.nodes_visited == single_stats.nodes_visited);
+    CHECK(batch_stats.boxes_tested == single_stats.boxes_tested);
+  }
+  CHECK_THROWS_WITH(tree.closest_hit_batch(rays, kdspace::RayRange{2, 1}), Catch::Contains("exceeds t_max"));
+  CHECK_THROWS_WITH(tree.any_hit_batch(rays, kdspace::RayRange{NAN, 1}), Catch::Contains("t_min must be finite"));
+}
+
 TEST_CASE("rays: trace statistics count rays, nodes and box tests", "[rays]") {
   const std::vector<Box3f> boxes = kdspace::generate_boxes(2000, kdspace::SceneKind::uniform, 16);
   Rng rng(16);

@@ -68,7 +68,7 @@ bool BoxTree::packet_fits(const Ray* rays) const {
 }
 
 template <bool AnyHit>
-void BoxTree::trace_packet(const Ray* rays, Hit* hits, RayStats& stats) const {
+void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const {
   std::array<detail::TraversalRay<float>, 4> lane_ray{detail::TraversalRay<float>(rays[0]),
                                                        detail::TraversalRay<float>(rays[1]),
                                                        detail::TraversalRay<float>(rays[2]),
@@ -84,7 +84,7 @@ void BoxTree::trace_packet(const Ray* rays, Hit* hits, RayStats& stats) const {
   for (int l = 0; l < 4; ++l) hits[l] = Hit{};
 
   // The scene's bounds, as clip_widened does it for one ray.
-  __m128 t_entry = _mm_setzero_ps(), t_exit = _mm_set1_ps(std::numeric_limits<float>::infinity());
+  __m128 t_entry = _mm_set1_ps(range.t_min), t_exit = _mm_set1_ps(range.t_max);
   for (int a = 0; a < 3; ++a) {
     __m128 t0 = _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(bounds_.lo[a]), origin[a]), inverse[a]);
     __m128 t1 = _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(bounds_.hi[a]), origin[a]), inverse[a]);
@@ -98,9 +98,9 @@ void BoxTree::trace_packet(const Ray* rays, Hit* hits, RayStats& stats) const {
   std::array<double, 4> best_t;
   std::array<std::int32_t, 4> best_box;
   alignas(16) std::array<float, 4> best_bound;  // best_t rounded up to float
-  best_t.fill(std::numeric_limits<double>::infinity());
+  best_t.fill(range.t_max);
   best_box.fill(Hit::none);
-  best_bound.fill(std::numeric_limits<float>::infinity());
+  best_bound.fill(range.t_max);
   unsigned done = 0;  // any hit: rays that have found one
   std::array<std::optional<PreparedRay>, 4> exact;
   const std::uint32_t negative_axes = r0.negative[0] | r0.negative[1] << 1 | r0.negative[2] << 2;
@@ -129,12 +129,12 @@ void BoxTree::trace_packet(const Ray* rays, Hit* hits, RayStats& stats) const {
           const LeafBlock* blocks = blocks_.data() + node.first() / 4;
           const std::uint32_t* ids = references_.data() + node.first();
           for (std::uint32_t first = 0; first < count; first += 4, ++blocks, ids += 4) {
-            unsigned lanes = detail::block_candidates<float>(*blocks, lane_ray[l], 0.0f, best_bound[l]);
+            unsigned lanes = detail::block_candidates<float>(*blocks, lane_ray[l], range.t_min, best_bound[l]);
             if (count - first < 4) lanes &= (1u << (count - first)) - 1;
             while (lanes != 0) {
               const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
               lanes &= lanes - 1;
-              double t_near = 0, t_far = best_t[l];
+              double t_near = range.t_min, t_far = best_t[l];
               if (!exact[l]) exact[l].emplace(rays[l]);
               if (!clip_to_box(detail::box_in_lane(*blocks, lane), *exact[l], t_near, t_far)) continue;
               const auto box = static_cast<std::int32_t>(ids[lane]);
@@ -191,11 +191,11 @@ void BoxTree::trace_packet(const Ray* rays, Hit* hits, RayStats& stats) const {
 bool BoxTree::packet_fits(const Ray* /*rays*/) const { return false; }
 
 template <bool AnyHit>
-void BoxTree::trace_packet(const Ray* /*rays*/, Hit* /*hits*/, RayStats& /*stats*/) const {}
+void BoxTree::trace_packet(const Ray* /*rays*/, RayRange /*range*/, Hit* /*hits*/, RayStats& /*stats*/) const {}
 
 #endif
 
-template void BoxTree::trace_packet<false>(const Ray*, Hit*, RayStats&) const;
-template void BoxTree::trace_packet<true>(const Ray*, Hit*, RayStats&) const;
+template void BoxTree::trace_packet<false>(const Ray*, RayRange, Hit*, RayStats&) const;
+template void BoxTree::trace_packet<true>(const Ray*, RayRange, Hit*, RayStats&) const;
 
 }  // namespace kdspace

@@ -192,9 +192,10 @@ Hit BoxTree::any_hit(const Ray& ray, float t_min, float t_max, RayStats* stats) 
 }
 
 template <bool AnyHit>
-std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, unsigned threads,
+std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange range, unsigned threads,
                                       RayStats* stats) const {
   if (n > 0 && rays == nullptr) throw Error("rays: null pointer");
+  check_range(range.t_min, range.t_max);
   for (std::size_t i = 0; i < n; ++i) {
     if (usable(rays[i])) continue;
     const std::string problem = ray_problem(rays[i]);
@@ -203,7 +204,6 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, unsigned t
   std::vector<Hit> hits(n);
   const unsigned workers = detail::resolve_threads(threads);
   std::vector<RayStats> per_worker(workers);
-  const float inf = std::numeric_limits<float>::infinity();
   detail::parallel_for(n, workers, 256, [&](std::size_t begin, std::size_t end, unsigned worker) {
     RayStats local;
     // Four rays that run the same way (coherent rays: a camera's neighbouring pixels) go through the
@@ -211,12 +211,13 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, unsigned t
     std::size_t i = begin;
     for (; i + 4 <= end; i += 4) {
       if (packet_fits(rays + i)) {
-        trace_packet<AnyHit>(rays + i, hits.data() + i, local);
+        trace_packet<AnyHit>(rays + i, range, hits.data() + i, local);
       } else {
-        for (std::size_t k = i; k < i + 4; ++k) hits[k] = trace_any_precision<AnyHit>(rays[k], 0.0f, inf, local);
+        for (std::size_t k = i; k < i + 4; ++k)
+          hits[k] = trace_any_precision<AnyHit>(rays[k], range.t_min, range.t_max, local);
       }
     }
-    for (; i < end; ++i) hits[i] = trace_any_precision<AnyHit>(rays[i], 0.0f, inf, local);
+    for (; i < end; ++i) hits[i] = trace_any_precision<AnyHit>(rays[i], range.t_min, range.t_max, local);
     per_worker[worker] += local;
   });
   if (stats)
@@ -224,14 +225,14 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, unsigned t
   return hits;
 }
 
-std::vector<Hit> BoxTree::closest_hit_batch(const Ray* rays, std::size_t n, unsigned threads,
+std::vector<Hit> BoxTree::closest_hit_batch(const Ray* rays, std::size_t n, RayRange range, unsigned threads,
                                             RayStats* stats) const {
-  return trace_batch<false>(rays, n, threads, stats);
+  return trace_batch<false>(rays, n, range, threads, stats);
 }
 
-std::vector<Hit> BoxTree::any_hit_batch(const Ray* rays, std::size_t n, unsigned threads,
+std::vector<Hit> BoxTree::any_hit_batch(const Ray* rays, std::size_t n, RayRange range, unsigned threads,
                                         RayStats* stats) const {
-  return trace_batch<true>(rays, n, threads, stats);
+  return trace_batch<true>(rays, n, range, threads, stats);
 }
 
 }  // namespace kdspace

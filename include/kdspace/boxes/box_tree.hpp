@@ -208,20 +208,38 @@ class BoxTree {
   Hit any_hit(const Ray& ray, float t_min = 0, float t_max = std::numeric_limits<float>::infinity(),
               RayStats* stats = nullptr) const;
 
-  // ---- batches over [0, inf), on `threads` threads (0 = all); the same answers as one thread -----
+  // ---- batches, on `threads` threads (0 = all); the same answers as one thread ------------------
 
-  /// Throws Error naming the first unusable ray, 1-based ("ray 12: direction is zero"), before tracing.
+  /// Closest hits over [0, inf), or over `range`. Throws Error naming the first unusable ray,
+  /// 1-based ("ray 12: direction is zero"), or a bad range, before tracing.
   std::vector<Hit> closest_hit_batch(const Ray* rays, std::size_t n, unsigned threads = 1,
+                                     RayStats* stats = nullptr) const {
+    return closest_hit_batch(rays, n, RayRange{}, threads, stats);
+  }
+  std::vector<Hit> closest_hit_batch(const Ray* rays, std::size_t n, RayRange range, unsigned threads = 1,
                                      RayStats* stats = nullptr) const;
   std::vector<Hit> closest_hit_batch(const std::vector<Ray>& rays, unsigned threads = 1,
                                      RayStats* stats = nullptr) const {
-    return closest_hit_batch(rays.data(), rays.size(), threads, stats);
+    return closest_hit_batch(rays.data(), rays.size(), RayRange{}, threads, stats);
   }
+  std::vector<Hit> closest_hit_batch(const std::vector<Ray>& rays, RayRange range, unsigned threads = 1,
+                                     RayStats* stats = nullptr) const {
+    return closest_hit_batch(rays.data(), rays.size(), range, threads, stats);
+  }
+  /// Any hits (as any_hit) over [0, inf), or over `range`: shadow rays.
   std::vector<Hit> any_hit_batch(const Ray* rays, std::size_t n, unsigned threads = 1,
+                                 RayStats* stats = nullptr) const {
+    return any_hit_batch(rays, n, RayRange{}, threads, stats);
+  }
+  std::vector<Hit> any_hit_batch(const Ray* rays, std::size_t n, RayRange range, unsigned threads = 1,
                                  RayStats* stats = nullptr) const;
   std::vector<Hit> any_hit_batch(const std::vector<Ray>& rays, unsigned threads = 1,
                                  RayStats* stats = nullptr) const {
-    return any_hit_batch(rays.data(), rays.size(), threads, stats);
+    return any_hit_batch(rays.data(), rays.size(), RayRange{}, threads, stats);
+  }
+  std::vector<Hit> any_hit_batch(const std::vector<Ray>& rays, RayRange range, unsigned threads = 1,
+                                 RayStats* stats = nullptr) const {
+    return any_hit_batch(rays.data(), rays.size(), range, threads, stats);
   }
 
  private:
@@ -230,12 +248,13 @@ class BoxTree {
   template <bool AnyHit>
   Hit trace_any_precision(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
   template <bool AnyHit>
-  std::vector<Hit> trace_batch(const Ray* rays, std::size_t n, unsigned threads, RayStats* stats) const;
+  std::vector<Hit> trace_batch(const Ray* rays, std::size_t n, RayRange range, unsigned threads,
+                               RayStats* stats) const;
   /// True when rays[0 .. 4) can be traced together (packet_rays in trace_packet.cpp).
   bool packet_fits(const Ray* rays) const;
-  /// Traces rays[0 .. 4) together over [0, inf): the hits and statistics of four single traces.
+  /// Traces rays[0 .. 4) together over `range`: the hits and statistics of four single traces.
   template <bool AnyHit>
-  void trace_packet(const Ray* rays, Hit* hits, RayStats& stats) const;
+  void trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const;
   void compute_stats();
 
   std::vector<Box3f> boxes_;

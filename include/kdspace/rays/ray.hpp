@@ -31,6 +31,13 @@ struct Hit {
   friend bool operator!=(const Hit& a, const Hit& b) { return !(a == b); }
 };
 
+/// The part of each ray a batch looks at: t in [t_min, t_max] (t_min finite, t_min <= t_max). A
+/// shadow ray from a point p towards a light at q is {p, q - p} over [epsilon, 1].
+struct RayRange {
+  float t_min = 0;
+  float t_max = std::numeric_limits<float>::infinity();
+};
+
 /// What queries cost, summed over the rays traced: add the stats of many calls with +=.
 struct RayStats {
   std::uint64_t rays = 0;
