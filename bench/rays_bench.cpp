@@ -41,8 +41,8 @@
 //             beside the scene, over t in [1e-4, 1] (the light at t = 1): any hit, the occlusion
 //             test of a renderer.
 //
-// Measured: the build (wall seconds, everything from the boxes to a traceable structure; Embree: new
-// scene, geometry, buffers, commit), memory (kdspace: memory_bytes(); Embree: the bytes its device
+// Measured: the build (wall seconds, or with --cpu-time CPU seconds; everything from the boxes to a
+// traceable structure; Embree: new scene, geometry, buffers, commit), memory (kdspace: memory_bytes(); Embree: the bytes its device
 // allocated for the scene, as reported by its memory monitor, plus for user geometry the 24-byte boxes
 // the callbacks read), and speed in Mrays/s on 1 and 2 threads. Repetitions are interleaved across
 // contenders (repetition loop outside, contenders inside); medians are reported.
@@ -80,7 +80,7 @@
 //
 // usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--real DIR] [--voxels R]
 //                           [--only-real] [--reps R] [--rays M] [--image WxH] [--quality medium,high]
-//                           [--tri-quality medium,high] [--robust] [--quick]
+//                           [--tri-quality medium,high] [--robust] [--cpu-time] [--quick]
 //   --sizes     synthetic scene sizes in boxes (default 1000,100000,1000000; 1e5 is accepted)
 //   --kinds     synthetic scene kinds (default uniform,clustered)
 //   --real      a folder filled by bench/real_data/fetch.sh: adds the mesh and voxel scenes
@@ -92,6 +92,8 @@
 //   --quality   Embree build qualities for user geometry (default medium,high)
 //   --tri-quality  Embree build qualities for triangles (default medium; "none": no triangles)
 //   --robust    Embree scenes with RTC_SCENE_FLAG_ROBUST (names get "-robust"); default: no flags
+//   --cpu-time  CPU seconds of the process (divided by the threads at work) instead of wall seconds:
+//               for a machine shared with other jobs
 //   --quick     sizes 1000,100000, 200000 random rays, a 512x384 image, 1 repetition (explicit options
 //               still win)
 //
@@ -109,6 +111,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <limits>
 #include <memory>
 #include <string>
@@ -132,6 +135,31 @@ using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
+
+/// --cpu-time: measure the CPU time of this process (divided by the threads at work) instead of wall
+/// time. On a machine shared with other jobs, wall time also counts the time the others held the
+/// cores; the figures of a quiet machine are wall times.
+bool use_cpu_time = false;
+
+double process_cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+/// Seconds of a measured step: wall seconds, or with --cpu-time CPU seconds / threads.
+class Stopwatch {
+ public:
+  explicit Stopwatch(unsigned threads = 1) : threads_(threads), wall_(Clock::now()), cpu_(process_cpu_seconds()) {}
+  double seconds() const {
+    return use_cpu_time ? (process_cpu_seconds() - cpu_) / threads_ : seconds_since(wall_);
+  }
+
+ private:
+  unsigned threads_;
+  Clock::time_point wall_;
+  double cpu_;
+};
 double dbl(std::size_t x) {
   return static_cast<double>(x);
 }
@@ -164,6 +192,7 @@ struct Options {
   std::string real_dir;           ///< fetch.sh's folder, or "" for no real scenes
   std::size_t voxel_resolution = 256;
   bool synthetic = true;
+  bool cpu_time = false;
 };
 
 [[noreturn]] void usage(const char* problem) {
@@ -172,7 +201,7 @@ struct Options {
       stderr,
       "usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--real DIR] [--voxels R]\n"
       "                          [--only-real] [--reps R] [--rays M] [--image WxH] [--quality medium,high]\n"
-      "                          [--tri-quality medium,high] [--robust] [--quick]\n");
+      "                          [--tri-quality medium,high] [--robust] [--cpu-time] [--quick]\n");
   std::exit(2);
 }
 
@@ -257,6 +286,8 @@ Options parse(int argc, char** argv) {
       o.voxel_resolution = r == "0" ? 0 : parse_count(r);
     } else if (a == "--only-real") {
       o.synthetic = false;
+    } else if (a == "--cpu-time") {
+      o.cpu_time = true;
     } else if (a == "--quick") {
       quick = true;
     } else if (a == "--help" || a == "-h") {
@@ -770,16 +801,16 @@ void print_profile(const Scene& scene, const std::array<RaySet, 3>& sets) {
       else
         tree.closest_hit(r, set.t_min, set.t_max, &stats);
     };
-    const auto once = Clock::now();
+    const Stopwatch once;
     for (const Ray& r : set.rays) trace(r);
-    const double cold = seconds_since(once) * 1e9 / dbl(set.rays.size());
+    const double cold = once.seconds() * 1e9 / dbl(set.rays.size());
     const kdspace::RayStats per_ray = stats;
-    const auto twice = Clock::now();
+    const Stopwatch twice;
     for (const Ray& r : set.rays) {
       trace(r);
       trace(r);
     }
-    const double hot = seconds_since(twice) * 1e9 / dbl(set.rays.size()) - cold;
+    const double hot = twice.seconds() * 1e9 / dbl(set.rays.size()) - cold;
     std::printf("| %s | %.2f | %.2f | %.1f | %.1f |\n", set.name, per_ray.nodes_visited_per_ray(),
                 per_ray.boxes_tested_per_ray(), cold, hot);
     std::printf(
@@ -818,16 +849,16 @@ bool run_scene(const Options& o, const Scene& scene, const std::vector<std::uniq
       Contender& contender = *contenders[c];
       std::fprintf(stderr, "  %s (%zu boxes) rep %d/%d: %s\n", scene.name.c_str(), n, rep + 1, o.reps,
                    contender.name().c_str());
-      const auto start = Clock::now();
+      const Stopwatch build;
       contender.build(boxes);
-      samples[c].build_s.push_back(seconds_since(start));
+      samples[c].build_s.push_back(build.seconds());
       samples[c].memory_bytes = contender.memory_bytes();
       for (std::size_t s = 0; s < sets.size(); ++s) {
         std::array<std::vector<Hit>, 2> answers;
         for (unsigned threads = 1; threads <= 2; ++threads) {
-          const auto trace_start = Clock::now();
+          const Stopwatch clock(threads);
           answers[threads - 1] = contender.trace(sets[s], threads);
-          const double seconds = seconds_since(trace_start);
+          const double seconds = clock.seconds();
           samples[c].mrays[s][threads - 1].push_back(dbl(sets[s].rays.size()) / seconds / 1e6);
         }
         if (rep != 0) continue;
@@ -997,6 +1028,7 @@ std::vector<Scene> make_scenes(const Options& o) {
 
 int main(int argc, char** argv) {
   const Options o = parse(argc, argv);
+  use_cpu_time = o.cpu_time;
   std::vector<Scene> scenes;
   try {
     scenes = make_scenes(o);
@@ -1025,13 +1057,15 @@ int main(int argc, char** argv) {
       "coherent rays). Embree: "
       "device \"threads=1\" (builds on 1 thread; tasking %s; backface culling %s), rtcIntersect1 / rtcOccluded1 "
       "per ray; user geometry = boxes with kdspace's slab test in the callbacks; tri = 12 triangles per box. "
-      "Build quality in the name. 2 thr: two threads sharing the rays in chunks of 256. hardware threads: %u.\n",
+      "Build quality in the name. 2 thr: two threads sharing the rays in chunks of 256. hardware threads: %u. "
+      "Times: %s.\n",
       tasking == 0   ? "internal"
       : tasking == 1 ? "TBB"
       : tasking == 2 ? "PPL"
                      : "unknown",
       rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) ? "on" : "off",
-      std::thread::hardware_concurrency());
+      std::thread::hardware_concurrency(),
+      o.cpu_time ? "CPU seconds of the process / threads at work (--cpu-time)" : "wall seconds");
 
   bool agree = true;
   {
