@@ -19,11 +19,11 @@
 //   Of the user-geometry variants the one with the higher geometric mean of its trace speeds is the
 //   scene's peer, marked "(peer)" in the table and used in the summary.
 // Embree traces with rtcIntersect1 / rtcOccluded1, one ray at a time through an RTCIntersectContext
-// (its packet calls, rtcIntersect4/8/16, are not measured here). The Embree device is created with "threads=1": its builds run
-// on one thread, as kdspace's default build does. For two threads both libraries spread the rays over
-// two threads that take chunks of 256 rays from a shared counter (kdspace: the batches on 2 threads;
-// Embree: the calling thread and one std::thread),
-// so each traces about half and a costly part of the image does not leave one thread idle.
+// (its packet calls, rtcIntersect4/8/16, are not measured here). The Embree device is created with
+// "threads=1": its builds run on one thread, as kdspace's default build does. For two threads both libraries
+// spread the rays over two threads that take chunks of 256 rays from a shared counter (kdspace: the batches
+// on 2 threads; Embree: the calling thread and one std::thread), so each traces about half and a costly part
+// of the image does not leave one thread idle.
 //
 // Scenes
 //   uniform, clustered   generate_boxes(n, kind, seed 1) in the unit cube, for each --sizes n.
@@ -42,14 +42,14 @@
 //             test of a renderer.
 //
 // Measured: the build (wall seconds, or with --cpu-time CPU seconds; everything from the boxes to a
-// traceable structure; Embree: new scene, geometry, buffers, commit), memory (kdspace: memory_bytes(); Embree: the bytes its device
-// allocated for the scene, as reported by its memory monitor, plus for user geometry the 24-byte boxes
-// the callbacks read), and speed in Mrays/s on 1 and 2 threads. Repetitions are interleaved across
-// contenders (repetition loop outside, contenders inside); medians are reported.
-// Profile (kdspace, after the repetitions, 1 thread): the tree (SAH cost, leaves, references per
-// box, depth), per ray set the nodes visited and boxes tested per ray, and the time per ray cold (as
-// measured) and hot: each ray traced twice in a row, the second time with its nodes and boxes in
-// cache, so cold - hot is the time spent waiting for memory.
+// traceable structure; Embree: new scene, geometry, buffers, commit), memory (kdspace: memory_bytes();
+// Embree: the bytes its device allocated for the scene, as reported by its memory monitor, plus for user
+// geometry the 24-byte boxes the callbacks read), and speed in Mrays/s on 1 and 2 threads. Repetitions are
+// interleaved across contenders (repetition loop outside, contenders inside); medians are reported. Profile
+// (kdspace, after the repetitions, 1 thread): the tree (SAH cost, leaves, references per box, depth), per ray
+// set the nodes visited and boxes tested per ray, and the time per ray cold (as measured) and hot: each ray
+// traced twice in a row, the second time with its nodes and boxes in cache, so cold - hot is the time spent
+// waiting for memory.
 //
 // Agreement (first repetition, 1 thread): each Embree variant's hit for every ray against kdspace's:
 //   hit/miss      one hits, the other does not
@@ -150,7 +150,8 @@ double process_cpu_seconds() {
 /// Seconds of a measured step: wall seconds, or with --cpu-time CPU seconds / threads.
 class Stopwatch {
  public:
-  explicit Stopwatch(unsigned threads = 1) : threads_(threads), wall_(Clock::now()), cpu_(process_cpu_seconds()) {}
+  explicit Stopwatch(unsigned threads = 1)
+      : threads_(threads), wall_(Clock::now()), cpu_(process_cpu_seconds()) {}
   double seconds() const {
     return use_cpu_time ? (process_cpu_seconds() - cpu_) / threads_ : seconds_since(wall_);
   }
@@ -188,8 +189,8 @@ struct Options {
   int reps = 3;
   std::size_t random_rays = 1000000;
   std::size_t width = 1024, height = 768;
-  bool robust = false;  ///< RTC_SCENE_FLAG_ROBUST on the Embree scenes
-  std::string real_dir;           ///< fetch.sh's folder, or "" for no real scenes
+  bool robust = false;   ///< RTC_SCENE_FLAG_ROBUST on the Embree scenes
+  std::string real_dir;  ///< fetch.sh's folder, or "" for no real scenes
   std::size_t voxel_resolution = 256;
   bool synthetic = true;
   bool cpu_time = false;
@@ -327,7 +328,7 @@ void report_embree_error(void* /*user*/, RTCError code, const char* message) {
 /// (Embree's documented way of passing per-ray data to callbacks).
 struct RayContext {
   RTCIntersectContext embree;
-  kdspace::detail::PreparedRay ray;  // the very preparation and slab test of kdspace's traversal
+  kdspace::detail::PreparedRay ray;   // the very preparation and slab test of kdspace's traversal
   std::int32_t occluder = Hit::none;  ///< the box that ended a shadow ray
 
   explicit RayContext(const Ray& r) : ray(r) { rtcInitIntersectContext(&embree); }
@@ -348,7 +349,8 @@ void box_bounds(const RTCBoundsFunctionArguments* args) {
 }
 
 [[noreturn]] void not_single(unsigned n) {
-  std::fprintf(stderr, "kdspace-rays-bench: user geometry called with N = %u (only rtc*1 calls are used)\n", n);
+  std::fprintf(stderr, "kdspace-rays-bench: user geometry called with N = %u (only rtc*1 calls are used)\n",
+               n);
   std::abort();
 }
 
@@ -436,16 +438,19 @@ constexpr float shadow_t_min = 1e-4f;
 
 /// From each hit point of `primary` (hits[i]) towards a point light above and beside the scene
 /// (from -x, +y, above; the camera looks from +x, -y), over t in [shadow_t_min, 1].
-std::vector<Ray> shadow_rays(const std::vector<Ray>& primary, const std::vector<Hit>& hits, const Box3f& bounds) {
+std::vector<Ray> shadow_rays(const std::vector<Ray>& primary, const std::vector<Hit>& hits,
+                             const Box3f& bounds) {
   std::array<double, 3> light{};
   const double factor[3] = {-0.3, 1.5, 2.0};  // the light at lo + factor * extent
-  for (int a = 0; a < 3; ++a) light[a] = bounds.lo[a] + factor[a] * (static_cast<double>(bounds.hi[a]) - bounds.lo[a]);
+  for (int a = 0; a < 3; ++a)
+    light[a] = bounds.lo[a] + factor[a] * (static_cast<double>(bounds.hi[a]) - bounds.lo[a]);
   std::vector<Ray> rays;
   for (std::size_t i = 0; i < primary.size(); ++i) {
     if (!hits[i].hit()) continue;
     Ray r;
     for (int a = 0; a < 3; ++a) {
-      r.origin[a] = static_cast<float>(primary[i].origin[a] + static_cast<double>(hits[i].t) * primary[i].direction[a]);
+      r.origin[a] =
+          static_cast<float>(primary[i].origin[a] + static_cast<double>(hits[i].t) * primary[i].direction[a]);
       r.direction[a] = static_cast<float>(light[a] - r.origin[a]);
     }
     if (kdspace::ray_problem(r).empty()) rays.push_back(r);
@@ -502,7 +507,8 @@ class KdspaceContender final : public Contender {
   void build(const std::vector<Box3f>& boxes) override { tree_ = std::make_unique<kdspace::BoxTree>(boxes); }
   std::vector<Hit> trace(const RaySet& set, unsigned threads) const override {
     const kdspace::RayRange range{set.t_min, set.t_max};
-    return set.any_hit ? tree_->any_hit_batch(set.rays, range, threads) : tree_->closest_hit_batch(set.rays, range, threads);
+    return set.any_hit ? tree_->any_hit_batch(set.rays, range, threads)
+                       : tree_->closest_hit_batch(set.rays, range, threads);
   }
   void release() override { tree_.reset(); }
   std::size_t memory_bytes() const override { return tree_->memory_bytes(); }
@@ -705,9 +711,9 @@ Agreement compare(const std::vector<Hit>& reference, const std::vector<Hit>& oth
     // (triangles do not say which, so then only kdspace's).
     const Hit& closer = a.hit() && (!b.hit() || a.t <= b.t || set.any_hit) ? a : b;
     const bool known = closer.hit() && !(set.any_hit && &closer == &b && !exact);
-    const double length = known ? segment_in_box(boxes[static_cast<std::size_t>(closer.box)], set.rays[i],
-                                                 set.t_min, set.t_max)
-                                : std::numeric_limits<double>::infinity();
+    const double length =
+        known ? segment_in_box(boxes[static_cast<std::size_t>(closer.box)], set.rays[i], set.t_min, set.t_max)
+              : std::numeric_limits<double>::infinity();
     if (std::abs(length) <= graze) {
       ++g.grazing;
     } else if (a.hit() != b.hit()) {
@@ -792,7 +798,9 @@ void print_profile(const Scene& scene, const std::array<RaySet, 3>& sets) {
       "per box, %.1f MB.\n\n",
       t.sah_cost, t.nodes, t.leaves, t.empty_leaves, t.depth, t.references_per_box,
       dbl(tree.memory_bytes()) / 1e6);
-  std::printf("| rays | nodes / ray | boxes tested / ray | ns / ray cold | ns / ray hot |\n|---|---:|---:|---:|---:|\n");
+  std::printf(
+      "| rays | nodes / ray | boxes tested / ray | ns / ray cold | ns / ray hot "
+      "|\n|---|---:|---:|---:|---:|\n");
   for (const RaySet& set : sets) {
     kdspace::RayStats stats;
     auto trace = [&](const Ray& r) {
@@ -822,7 +830,8 @@ void print_profile(const Scene& scene, const std::array<RaySet, 3>& sets) {
 }
 
 /// Runs one scene and prints its tables and JSON lines. Returns false on a real disagreement.
-bool run_scene(const Options& o, const Scene& scene, const std::vector<std::unique_ptr<Contender>>& contenders,
+bool run_scene(const Options& o, const Scene& scene,
+               const std::vector<std::unique_ptr<Contender>>& contenders,
                std::vector<SceneSummary>& summary) {
   const std::vector<Box3f>& boxes = scene.boxes;
   const std::size_t n = boxes.size();
@@ -833,7 +842,8 @@ bool run_scene(const Options& o, const Scene& scene, const std::vector<std::uniq
                                         std::pow(bounds.hi[2] - bounds.lo[2], 2.0));
   std::array<RaySet, 3> sets{
       RaySet{"primary", false,
-             kdspace::primary_rays(kdspace::fit_camera(bounds, dbl(o.width) / dbl(o.height)), o.width, o.height)},
+             kdspace::primary_rays(kdspace::fit_camera(bounds, dbl(o.width) / dbl(o.height)), o.width,
+                                   o.height)},
       RaySet{"random", false, kdspace::random_rays(o.random_rays, bounds, 2)}, RaySet{"shadow", true, {}}};
   {
     const kdspace::BoxTree tree(boxes);
@@ -867,8 +877,8 @@ bool run_scene(const Options& o, const Scene& scene, const std::vector<std::uniq
         Agreement& g = samples[c].agreement[s];
         const bool triangles = std::string(contender.library()) == "embree-tri";
         if (c != 0)
-          g = compare(reference[s], answers[0], sets[s], boxes, graze, triangles && !sets[s].any_hit, !triangles,
-                      contender.name() + " " + sets[s].name);
+          g = compare(reference[s], answers[0], sets[s], boxes, graze, triangles && !sets[s].any_hit,
+                      !triangles, contender.name() + " " + sets[s].name);
         g.threads_differ = count_different(answers[0], answers[1]);
       }
       contender.release();
@@ -879,17 +889,21 @@ bool run_scene(const Options& o, const Scene& scene, const std::vector<std::uniq
   std::size_t peer = 0;
   for (std::size_t c = 1; c < contenders.size(); ++c)
     if (std::string(contenders[c]->library()) == "embree-user" &&
-        (peer == 0 || samples[c].geometric_mean_speed(sets.size()) > samples[peer].geometric_mean_speed(sets.size())))
+        (peer == 0 ||
+         samples[c].geometric_mean_speed(sets.size()) > samples[peer].geometric_mean_speed(sets.size())))
       peer = c;
 
   std::printf(
-      "\n### %s: %zu boxes; %zu primary rays (%zux%zu), %zu random rays, %zu shadow rays (any hit); median of "
+      "\n### %s: %zu boxes; %zu primary rays (%zux%zu), %zu random rays, %zu shadow rays (any hit); median "
+      "of "
       "%d\n\n",
       scene.name.c_str(), n, sets[0].rays.size(), o.width, o.height, sets[1].rays.size(), sets[2].rays.size(),
       o.reps);
   std::printf(
-      "| contender | build s | memory MB | primary Mrays/s 1 thr | 2 thr | random 1 thr | 2 thr | shadow 1 thr | "
-      "2 thr | kdspace / contender: build s | primary 1 thr | 2 thr | random 1 thr | 2 thr | shadow 1 thr | 2 "
+      "| contender | build s | memory MB | primary Mrays/s 1 thr | 2 thr | random 1 thr | 2 thr | shadow 1 "
+      "thr | "
+      "2 thr | kdspace / contender: build s | primary 1 thr | 2 thr | random 1 thr | 2 thr | shadow 1 thr | "
+      "2 "
       "thr |\n");
   std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   const Samples& kd = samples[0];
@@ -898,7 +912,8 @@ bool run_scene(const Options& o, const Scene& scene, const std::vector<std::uniq
     std::string name = contenders[c]->name();
     if (c == peer && c != 0) name += " (peer)";
     std::printf("| %s | %.4f | %.1f |", name.c_str(), median(s.build_s), dbl(s.memory_bytes) / 1e6);
-    for (std::size_t set = 0; set < sets.size(); ++set) std::printf(" %.3f | %.3f |", s.speed(set, 0), s.speed(set, 1));
+    for (std::size_t set = 0; set < sets.size(); ++set)
+      std::printf(" %.3f | %.3f |", s.speed(set, 0), s.speed(set, 1));
     if (c == 0) {
       std::printf(" - | - | - | - | - | - | - |\n");
       continue;
@@ -946,8 +961,9 @@ bool run_scene(const Options& o, const Scene& scene, const std::vector<std::uniq
                     sets[set].name, inside, g.threads_differ);
       } else {
         std::printf("| %s | %s | %zu | %zu | %zu | %zu | %zu | %zu | %zu%s | %zu |\n",
-                    contenders[c]->name().c_str(), sets[set].name, g.rays, g.hit_miss, g.t_differs, g.near_ties,
-                    g.ties, g.grazing, g.inside, g.inside_excluded ? " (left out)" : "", g.threads_differ);
+                    contenders[c]->name().c_str(), sets[set].name, g.rays, g.hit_miss, g.t_differs,
+                    g.near_ties, g.ties, g.grazing, g.inside, g.inside_excluded ? " (left out)" : "",
+                    g.threads_differ);
       }
       const bool user = std::string(contenders[c]->library()) == "embree-user";
       if (g.threads_differ > 0 || (user && g.real() > 0)) agree = false;
@@ -996,7 +1012,8 @@ void print_summary(const std::vector<SceneSummary>& summary) {
     std::printf("| %s | %zu | %.4f / %.4f | %s |", s.scene.c_str(), s.boxes, s.build_kd, s.build_peer,
                 format_ratio(s.build_kd, s.build_peer).c_str());
     for (std::size_t set = 0; set < 3; ++set)
-      std::printf(" %.2f / %.2f | %s |", s.kd[set], s.other[set], format_ratio(s.kd[set], s.other[set]).c_str());
+      std::printf(" %.2f / %.2f | %s |", s.kd[set], s.other[set],
+                  format_ratio(s.kd[set], s.other[set]).c_str());
     std::printf("\n");
   }
   for (const SceneSummary& s : summary)
@@ -1019,7 +1036,8 @@ std::vector<Scene> make_scenes(const Options& o) {
     if (mesh.triangles.empty()) continue;  // a scan: points only
     scenes.push_back(Scene{"mesh " + mesh.name, "mesh", kdspace::bench::triangle_boxes(mesh)});
     if (o.voxel_resolution > 0)
-      scenes.push_back(Scene{"voxels " + mesh.name, "voxels", kdspace::bench::surface_voxels(mesh, o.voxel_resolution)});
+      scenes.push_back(
+          Scene{"voxels " + mesh.name, "voxels", kdspace::bench::surface_voxels(mesh, o.voxel_resolution)});
   }
   return scenes;
 }
@@ -1053,11 +1071,14 @@ int main(int argc, char** argv) {
               rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_MINOR),
               rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_PATCH));
   std::printf(
-      "kdspace: BoxTree default build (sah_nlogn, 1 thread), closest_hit_batch and any_hit_batch (packets of 4 "
+      "kdspace: BoxTree default build (sah_nlogn, 1 thread), closest_hit_batch and any_hit_batch (packets of "
+      "4 "
       "coherent rays). Embree: "
-      "device \"threads=1\" (builds on 1 thread; tasking %s; backface culling %s), rtcIntersect1 / rtcOccluded1 "
+      "device \"threads=1\" (builds on 1 thread; tasking %s; backface culling %s), rtcIntersect1 / "
+      "rtcOccluded1 "
       "per ray; user geometry = boxes with kdspace's slab test in the callbacks; tri = 12 triangles per box. "
-      "Build quality in the name. 2 thr: two threads sharing the rays in chunks of 256. hardware threads: %u. "
+      "Build quality in the name. 2 thr: two threads sharing the rays in chunks of 256. hardware threads: "
+      "%u. "
       "Times: %s.\n",
       tasking == 0   ? "internal"
       : tasking == 1 ? "TBB"

@@ -119,8 +119,8 @@ TraceResult trace(const BoxTree& tree, const std::vector<Ray>& rays, unsigned th
 
 void build_scaling(const Options& o) {
   std::printf("== build time on uniform scenes, %u thread(s), best of %d ==\n", o.threads, o.repeat);
-  std::printf("%10s  %12s %8s  %12s %8s  %10s %8s  %9s %7s %6s\n", "boxes", "sah_nlogn s", "ratio",
-              "exact s", "ratio", "sah s", "ratio", "refs/box", "depth", "same");
+  std::printf("%10s  %12s %8s  %12s %8s  %10s %8s  %9s %7s %6s\n", "boxes", "sah_nlogn s", "ratio", "exact s",
+              "ratio", "sah s", "ratio", "refs/box", "depth", "same");
   double previous[3] = {0, 0, 0};
   for (const std::size_t n : o.sizes) {
     const std::vector<Box3f> boxes = generate_boxes(n, SceneKind::uniform, 1);
@@ -144,10 +144,11 @@ void build_scaling(const Options& o) {
     const double now[3] = {fast, exact, slow};
     char ratio[3][32] = {"", "", ""}, slow_text[32] = "-";
     for (int k = 0; k < 3; ++k)
-      if (previous[k] > 0 && now[k] > 0) std::snprintf(ratio[k], sizeof ratio[k], "%.3f", now[k] / previous[k]);
+      if (previous[k] > 0 && now[k] > 0)
+        std::snprintf(ratio[k], sizeof ratio[k], "%.3f", now[k] / previous[k]);
     if (slow > 0) std::snprintf(slow_text, sizeof slow_text, "%.3f", slow);
-    std::printf("%10zu  %12.3f %8s  %12.3f %8s  %10s %8s  %9.3f %7zu %6s\n", n, fast, ratio[0], exact, ratio[1],
-                slow_text, ratio[2], tree.stats().references_per_box, tree.stats().depth,
+    std::printf("%10zu  %12.3f %8s  %12.3f %8s  %10s %8s  %9.3f %7zu %6s\n", n, fast, ratio[0], exact,
+                ratio[1], slow_text, ratio[2], tree.stats().references_per_box, tree.stats().depth,
                 n <= 400000 ? (same ? "yes" : "NO") : "-");
     std::fflush(stdout);
     for (int k = 0; k < 3; ++k) previous[k] = now[k];
@@ -186,14 +187,16 @@ void probability_comparison(const Options& o) {
 
 void binning_comparison(const Options& o) {
   std::printf("\n== binning: build and trace, best of %d builds; trace 1 thread ==\n", o.repeat);
-  std::printf("(threshold: nodes with more boxes place their plane by binning; 0 = exact sweep everywhere)\n");
+  std::printf(
+      "(threshold: nodes with more boxes place their plane by binning; 0 = exact sweep everywhere)\n");
   std::printf("%-10s %8s %10s %9s %9s %9s %10s  %11s %11s\n", "scene", "boxes", "threshold", "build s",
               "all thr s", "sah_cost", "refs/box", "primary Mr/s", "random Mr/s");
   const unsigned all = std::max(1u, std::thread::hardware_concurrency());
   for (const std::size_t n : {std::size_t{100000}, std::size_t{1000000}})
     for (const SceneKind kind : {SceneKind::uniform, SceneKind::clustered}) {
       const std::vector<Box3f> boxes = generate_boxes(n, kind, 1);
-      for (const std::size_t threshold : {std::size_t{0}, std::size_t{1}, std::size_t{256}, std::size_t{4096}}) {
+      for (const std::size_t threshold :
+           {std::size_t{0}, std::size_t{1}, std::size_t{256}, std::size_t{4096}}) {
         BoxBuildParams p;
         p.binning_threshold = threshold;
         p.threads = 1;

@@ -21,8 +21,8 @@
 #include <string>
 #include <vector>
 
-#include "kdspace/error.hpp"
 #include "kdspace/boxes/box_tree.hpp"
+#include "kdspace/error.hpp"
 #include "kdspace/rays/brute_force.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 #include "support.hpp"
@@ -507,33 +507,34 @@ TEST_CASE("rays: batches give the hits and stats of single rays on 1, 2 and 4 th
   Rng rng(15);
   for (const std::vector<Box3f>& boxes :
        {kdspace::generate_boxes(3000, kdspace::SceneKind::clustered, 15), integer_boxes(400, rng)}) {
-  const Box3f bounds = bounds_of(boxes);
-  std::vector<Ray> rays = random_rays(3000, bounds, rng);
-  for (const auto& camera : {kdspace::fit_camera(bounds, 1.0), kdspace::Camera{{5, 6, 30}, {6, 5, 6}, {0, 0, 1}, 70}}) {
-    const std::vector<Ray> primary = kdspace::primary_rays(camera, 61, 47);
-    rays.insert(rays.end(), primary.begin(), primary.end());
-  }
-  const BoxTree tree(boxes);
-  std::vector<Hit> single_closest, single_any;
-  RayStats single_stats;
-  for (const Ray& r : rays) {
-    single_closest.push_back(tree.closest_hit(r, 0, INFINITY, &single_stats));
-    single_any.push_back(tree.any_hit(r));
-  }
-  for (const unsigned threads : {1u, 2u, 4u}) {
-    RayStats stats;
-    const std::vector<Hit> closest = tree.closest_hit_batch(rays, threads, &stats);
-    const std::vector<Hit> any = tree.any_hit_batch(rays, threads);
-    REQUIRE(closest.size() == rays.size());
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-      REQUIRE(closest[i].box == single_closest[i].box);
-      REQUIRE(closest[i].t == single_closest[i].t);
-      REQUIRE(any[i].box == single_any[i].box);
+    const Box3f bounds = bounds_of(boxes);
+    std::vector<Ray> rays = random_rays(3000, bounds, rng);
+    for (const auto& camera :
+         {kdspace::fit_camera(bounds, 1.0), kdspace::Camera{{5, 6, 30}, {6, 5, 6}, {0, 0, 1}, 70}}) {
+      const std::vector<Ray> primary = kdspace::primary_rays(camera, 61, 47);
+      rays.insert(rays.end(), primary.begin(), primary.end());
     }
-    CHECK(stats.rays == single_stats.rays);
-    CHECK(stats.nodes_visited == single_stats.nodes_visited);
-    CHECK(stats.boxes_tested == single_stats.boxes_tested);
-  }
+    const BoxTree tree(boxes);
+    std::vector<Hit> single_closest, single_any;
+    RayStats single_stats;
+    for (const Ray& r : rays) {
+      single_closest.push_back(tree.closest_hit(r, 0, INFINITY, &single_stats));
+      single_any.push_back(tree.any_hit(r));
+    }
+    for (const unsigned threads : {1u, 2u, 4u}) {
+      RayStats stats;
+      const std::vector<Hit> closest = tree.closest_hit_batch(rays, threads, &stats);
+      const std::vector<Hit> any = tree.any_hit_batch(rays, threads);
+      REQUIRE(closest.size() == rays.size());
+      for (std::size_t i = 0; i < rays.size(); ++i) {
+        REQUIRE(closest[i].box == single_closest[i].box);
+        REQUIRE(closest[i].t == single_closest[i].t);
+        REQUIRE(any[i].box == single_any[i].box);
+      }
+      CHECK(stats.rays == single_stats.rays);
+      CHECK(stats.nodes_visited == single_stats.nodes_visited);
+      CHECK(stats.boxes_tested == single_stats.boxes_tested);
+    }
   }
 }
 
@@ -545,8 +546,8 @@ TEST_CASE("rays: batches over a range give the hits of single rays over it", "[r
   const std::vector<Ray> primary = kdspace::primary_rays(kdspace::fit_camera(bounds, 1.0), 40, 40);
   rays.insert(rays.end(), primary.begin(), primary.end());
   const BoxTree tree(boxes);
-  for (const kdspace::RayRange range : {kdspace::RayRange{0.5f, 1.5f}, kdspace::RayRange{-1, 0.25f},
-                                        kdspace::RayRange{1, 1}}) {
+  for (const kdspace::RayRange range :
+       {kdspace::RayRange{0.5f, 1.5f}, kdspace::RayRange{-1, 0.25f}, kdspace::RayRange{1, 1}}) {
     RayStats batch_stats, single_stats;
     const std::vector<Hit> closest = tree.closest_hit_batch(rays, range, 2, &batch_stats);
     const std::vector<Hit> any = tree.any_hit_batch(rays, range);
@@ -561,7 +562,8 @@ TEST_CASE("rays: batches over a range give the hits of single rays over it", "[r
     CHECK(batch_stats.boxes_tested == single_stats.boxes_tested);
   }
   CHECK_THROWS_WITH(tree.closest_hit_batch(rays, kdspace::RayRange{2, 1}), Catch::Contains("exceeds t_max"));
-  CHECK_THROWS_WITH(tree.any_hit_batch(rays, kdspace::RayRange{NAN, 1}), Catch::Contains("t_min must be finite"));
+  CHECK_THROWS_WITH(tree.any_hit_batch(rays, kdspace::RayRange{NAN, 1}),
+                    Catch::Contains("t_min must be finite"));
 }
 
 TEST_CASE("rays: trace statistics count rays, nodes and box tests", "[rays]") {
@@ -664,9 +666,9 @@ TEST_CASE("rays: the float traversal gives the double traversal's answers, bit f
   // equal in box and t; any hits agree on hit or miss (the two traversals may meet the boxes in a
   // different order).
   Rng rng(21);
-  const std::vector<std::vector<Box3f>> scenes{kdspace::generate_boxes(3000, kdspace::SceneKind::clustered, 21),
-                                               integer_boxes(600, rng), flat_boxes(600, rng),
-                                               mixed_scale_boxes(600, rng), overlapping_boxes(300, rng)};
+  const std::vector<std::vector<Box3f>> scenes{
+      kdspace::generate_boxes(3000, kdspace::SceneKind::clustered, 21), integer_boxes(600, rng),
+      flat_boxes(600, rng), mixed_scale_boxes(600, rng), overlapping_boxes(300, rng)};
   for (std::size_t s = 0; s < scenes.size(); ++s) {
     INFO("scene " << s);
     const std::vector<Box3f>& boxes = scenes[s];
@@ -690,8 +692,8 @@ TEST_CASE("rays: the float traversal gives the double traversal's answers, bit f
       if (b.box == static_cast<std::int32_t>(boxes.size())) continue;  // the far box
       if (a.box != b.box || (a.hit() && a.t != b.t)) {
         ++failures;
-        FAIL_CHECK("ray " << i << " " << describe(rays[i]) << ": float traversal box " << a.box << " t " << a.t
-                          << ", double traversal box " << b.box << " t " << b.t);
+        FAIL_CHECK("ray " << i << " " << describe(rays[i]) << ": float traversal box " << a.box << " t "
+                          << a.t << ", double traversal box " << b.box << " t " << b.t);
       }
       const Hit any_a = in_float.any_hit(rays[i]), any_b = in_double.any_hit(rays[i]);
       if (any_b.box != static_cast<std::int32_t>(boxes.size())) CHECK(any_a.hit() == any_b.hit());

@@ -90,8 +90,8 @@ std::optional<SplitCandidate> binned_split(const std::vector<BoxRef>& refs, cons
   // sweep chooses among the faces of the two bins around the best boundary.
   const int axis = best->split.axis;
   std::optional<SplitCandidate> refined;
-  refine(refs, cell, model, axis, bins[axis].boundary(best_boundary - 1), bins[axis].boundary(best_boundary + 1),
-         refined);
+  refine(refs, cell, model, axis, bins[axis].boundary(best_boundary - 1),
+         bins[axis].boundary(best_boundary + 1), refined);
   if (refined) best = refined;
   return best;
 }

@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "build_common.hpp"
-#include "layout.hpp"
 #include "kdspace/error.hpp"
+#include "layout.hpp"
 #include "sah_cost.hpp"
 
 namespace kdspace {

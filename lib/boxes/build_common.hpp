@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "kdspace/box.hpp"
-#include "kdspace/error.hpp"
 #include "kdspace/boxes/box_tree.hpp"
+#include "kdspace/error.hpp"
 
 namespace kdspace::detail {
 
@@ -96,11 +96,11 @@ inline std::vector<BoxRef> root_references(const std::vector<Box3f>& boxes) {
 /// child's index stored; a leaf's first reference and count. The final layout (layout.hpp) turns
 /// these into BoxNodes with adjacent children.
 struct BuiltNode {
-  float split = 0;           ///< inner nodes
-  std::uint32_t first = 0;   ///< leaf: first reference
-  std::uint32_t count = 0;   ///< leaf: boxes
-  std::uint32_t right = 0;   ///< inner: index of the right child
-  std::int8_t axis = -1;     ///< 0..2, or -1 for a leaf
+  float split = 0;          ///< inner nodes
+  std::uint32_t first = 0;  ///< leaf: first reference
+  std::uint32_t count = 0;  ///< leaf: boxes
+  std::uint32_t right = 0;  ///< inner: index of the right child
+  std::int8_t axis = -1;    ///< 0..2, or -1 for a leaf
 
   bool is_leaf() const { return axis < 0; }
 };

@@ -83,9 +83,7 @@ class SahNlognMethod {
 
  private:
   /// True when a node of n boxes places its plane by binning.
-  bool binned(std::size_t n) const {
-    return params_.binning_threshold != 0 && n > params_.binning_threshold;
-  }
+  bool binned(std::size_t n) const { return params_.binning_threshold != 0 && n > params_.binning_threshold; }
 
   /// Makes the events of every reference and sorts them per axis (the three axes at once when
   /// threads allow).

@@ -37,13 +37,15 @@ using detail::PreparedRay;
 /// Per lane: the ray's parameter widened down / up (detail::widen_down, widen_up) in SSE.
 inline __m128 widen_down4(__m128 t) {
   const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-  return _mm_sub_ps(t, _mm_add_ps(_mm_mul_ps(_mm_and_ps(t, magnitude), _mm_set1_ps(detail::Widening<float>::relative)),
-                                  _mm_set1_ps(detail::Widening<float>::absolute)));
+  return _mm_sub_ps(
+      t, _mm_add_ps(_mm_mul_ps(_mm_and_ps(t, magnitude), _mm_set1_ps(detail::Widening<float>::relative)),
+                    _mm_set1_ps(detail::Widening<float>::absolute)));
 }
 inline __m128 widen_up4(__m128 t) {
   const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-  return _mm_add_ps(t, _mm_add_ps(_mm_mul_ps(_mm_and_ps(t, magnitude), _mm_set1_ps(detail::Widening<float>::relative)),
-                                  _mm_set1_ps(detail::Widening<float>::absolute)));
+  return _mm_add_ps(
+      t, _mm_add_ps(_mm_mul_ps(_mm_and_ps(t, magnitude), _mm_set1_ps(detail::Widening<float>::relative)),
+                    _mm_set1_ps(detail::Widening<float>::absolute)));
 }
 
 /// A pending far child: its node and the four rays' intervals in it, with the rays that enter it.
@@ -69,16 +71,16 @@ bool BoxTree::packet_fits(const Ray* rays) const {
 
 template <bool AnyHit>
 void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const {
-  std::array<detail::TraversalRay<float>, 4> lane_ray{detail::TraversalRay<float>(rays[0]),
-                                                       detail::TraversalRay<float>(rays[1]),
-                                                       detail::TraversalRay<float>(rays[2]),
-                                                       detail::TraversalRay<float>(rays[3])};
+  std::array<detail::TraversalRay<float>, 4> lane_ray{
+      detail::TraversalRay<float>(rays[0]), detail::TraversalRay<float>(rays[1]),
+      detail::TraversalRay<float>(rays[2]), detail::TraversalRay<float>(rays[3])};
   const detail::TraversalRay<float>& r0 = lane_ray[0];  // its signs are the packet's
   __m128 origin[3], inverse[3];
   for (int a = 0; a < 3; ++a) {
-    origin[a] = _mm_setr_ps(lane_ray[0].origin[a], lane_ray[1].origin[a], lane_ray[2].origin[a], lane_ray[3].origin[a]);
-    inverse[a] =
-        _mm_setr_ps(lane_ray[0].inverse[a], lane_ray[1].inverse[a], lane_ray[2].inverse[a], lane_ray[3].inverse[a]);
+    origin[a] = _mm_setr_ps(lane_ray[0].origin[a], lane_ray[1].origin[a], lane_ray[2].origin[a],
+                            lane_ray[3].origin[a]);
+    inverse[a] = _mm_setr_ps(lane_ray[0].inverse[a], lane_ray[1].inverse[a], lane_ray[2].inverse[a],
+                             lane_ray[3].inverse[a]);
   }
   stats.rays += 4;
   for (int l = 0; l < 4; ++l) hits[l] = Hit{};
@@ -112,7 +114,8 @@ void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats&
     const PacketEntry entry = stack[--top];
     // Rays whose best hit lies before the cell, or that are done, skip it.
     active = entry.active & ~done &
-             static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(widen_down4(entry.t_entry), _mm_load_ps(best_bound.data()))));
+             static_cast<unsigned>(
+                 _mm_movemask_ps(_mm_cmple_ps(widen_down4(entry.t_entry), _mm_load_ps(best_bound.data()))));
     if (active == 0) continue;
     std::uint32_t index = entry.node;
     t_entry = entry.t_entry;
@@ -129,7 +132,8 @@ void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats&
           const LeafBlock* blocks = blocks_.data() + node.first() / 4;
           const std::uint32_t* ids = references_.data() + node.first();
           for (std::uint32_t first = 0; first < count; first += 4, ++blocks, ids += 4) {
-            unsigned lanes = detail::block_candidates<float>(*blocks, lane_ray[l], range.t_min, best_bound[l]);
+            unsigned lanes =
+                detail::block_candidates<float>(*blocks, lane_ray[l], range.t_min, best_bound[l]);
             if (count - first < 4) lanes &= (1u << (count - first)) - 1;
             while (lanes != 0) {
               const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
@@ -163,8 +167,10 @@ void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats&
       std::uint32_t near = index + 1, far = node.right_child();
       if ((negative_axes >> axis) & 1u) std::swap(near, far);
       const __m128 t_split = _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(node.split()), origin[axis]), inverse[axis]);
-      const unsigned far_only = static_cast<unsigned>(_mm_movemask_ps(_mm_cmplt_ps(t_split, widen_down4(t_entry))));
-      const unsigned near_only = static_cast<unsigned>(_mm_movemask_ps(_mm_cmpgt_ps(t_split, widen_up4(t_exit))));
+      const unsigned far_only =
+          static_cast<unsigned>(_mm_movemask_ps(_mm_cmplt_ps(t_split, widen_down4(t_entry))));
+      const unsigned near_only =
+          static_cast<unsigned>(_mm_movemask_ps(_mm_cmpgt_ps(t_split, widen_up4(t_exit))));
       const unsigned need_near = active & ~far_only, need_far = active & ~near_only;
       if (need_far == 0) {
         index = near;
@@ -188,10 +194,13 @@ void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats&
 
 #else  // no SSE2: no packets, every ray alone
 
-bool BoxTree::packet_fits(const Ray* /*rays*/) const { return false; }
+bool BoxTree::packet_fits(const Ray* /*rays*/) const {
+  return false;
+}
 
 template <bool AnyHit>
-void BoxTree::trace_packet(const Ray* /*rays*/, RayRange /*range*/, Hit* /*hits*/, RayStats& /*stats*/) const {}
+void BoxTree::trace_packet(const Ray* /*rays*/, RayRange /*range*/, Hit* /*hits*/,
+                           RayStats& /*stats*/) const {}
 
 #endif
 

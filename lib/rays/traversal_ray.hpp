@@ -74,7 +74,8 @@ inline Real round_up(double t) {
   if constexpr (std::is_same_v<Real, double>) {
     return t;
   } else {
-    if (!(std::abs(t) <= std::numeric_limits<float>::max())) return t > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::max();
+    if (!(std::abs(t) <= std::numeric_limits<float>::max()))
+      return t > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::max();
     const auto f = static_cast<float>(t);
     return f < t ? next_up(f) : f;
   }
@@ -96,7 +97,7 @@ inline bool fits_float_traversal(const Ray& ray, float limit) {
 template <class Real>
 struct TraversalRay {
   Real origin[3];
-  Real inverse[3];  ///< 1 / direction: +-inf on an axis the ray is parallel to (+0 or -0)
+  Real inverse[3];            ///< 1 / direction: +-inf on an axis the ray is parallel to (+0 or -0)
   std::uint32_t negative[3];  ///< 1 when the direction's sign bit is set, else 0
 #if defined(__SSE2__)
   __m128 origin4[3], inverse4[3];  ///< float only: the same, in every lane
@@ -169,7 +170,8 @@ inline unsigned block_candidates<float>(const LeafBlock& block, const TraversalR
 #if defined(__SSE2__)
   __m128 t_near = _mm_set1_ps(t_lo), t_far = _mm_set1_ps(t_hi);
   for (int a = 0; a < 3; ++a) {
-    const int enter = a + 3 * static_cast<int>(r.negative[a]), leave = a + 3 - 3 * static_cast<int>(r.negative[a]);
+    const int enter = a + 3 * static_cast<int>(r.negative[a]),
+              leave = a + 3 - 3 * static_cast<int>(r.negative[a]);
     const __m128 t0 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(block.plane[enter]), r.origin4[a]), r.inverse4[a]);
     const __m128 t1 = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(block.plane[leave]), r.origin4[a]), r.inverse4[a]);
     t_near = _mm_max_ps(t0, t_near);  // MAXPS/MINPS return the second operand when either is NaN
@@ -186,7 +188,8 @@ inline unsigned block_candidates<float>(const LeafBlock& block, const TraversalR
   for (int lane = 0; lane < 4; ++lane) {
     float t_near = t_lo, t_far = t_hi;
     for (int a = 0; a < 3; ++a) {
-      const int enter = a + 3 * static_cast<int>(r.negative[a]), leave = a + 3 - 3 * static_cast<int>(r.negative[a]);
+      const int enter = a + 3 * static_cast<int>(r.negative[a]),
+                leave = a + 3 - 3 * static_cast<int>(r.negative[a]);
       const float t0 = (block.plane[enter][lane] - r.origin[a]) * r.inverse[a];
       const float t1 = (block.plane[leave][lane] - r.origin[a]) * r.inverse[a];
       if (t0 > t_near) t_near = t0;  // false for NaN, as above

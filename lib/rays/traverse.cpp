@@ -24,15 +24,13 @@
 //   - every comparison of a split parameter with the cell's interval widens the interval, so a hit at
 //     the boundary between two cells is seen from both.
 //
-// The inner-node step is written without branches on the near/far decision (the far child is
-// always written to the stack and kept only when both children are visited): for incoherent rays
-// that decision is a coin toss, and a mispredicted branch costs more than the step itself.
+// Batches trace four coherent rays at a time (trace_packet.cpp), the same way.
 #include <array>
-#include <utility>
 #include <cmath>
 #include <limits>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "kdspace/boxes/box_tree.hpp"
@@ -66,7 +64,8 @@ void check_range(float t_min, float t_max) {
 /// batches check every ray, and for cheap rays the message-building check costs a noticeable share.
 inline bool usable(const Ray& ray) {
   float sum = 0;
-  for (int a = 0; a < 3; ++a) sum += 0.0f * ray.origin[a] + 0.0f * ray.direction[a];  // NaN if any is not finite
+  for (int a = 0; a < 3; ++a)
+    sum += 0.0f * ray.origin[a] + 0.0f * ray.direction[a];  // NaN if any is not finite
   const bool zero = ray.direction[0] == 0 && ray.direction[1] == 0 && ray.direction[2] == 0;
   return sum == 0 && !zero;
 }

@@ -148,7 +148,7 @@ struct alignas(32) LeafBlock {
 /// What a build made, and what it took.
 struct BoxTreeStats {
   std::size_t boxes = 0;
-  std::size_t nodes = 0;           ///< inner nodes and leaves
+  std::size_t nodes = 0;  ///< inner nodes and leaves
   std::size_t leaves = 0;
   std::size_t empty_leaves = 0;
   std::size_t depth = 0;          ///< of the deepest leaf (a root leaf: 0)
@@ -187,7 +187,9 @@ class BoxTree {
   /// between one leaf's end and the next leaf's start repeat the leaf's last index.
   const std::vector<std::uint32_t>& references() const { return references_; }
   /// The box indices held by a leaf node: leaf_references(n)[0 .. n.count()), ascending.
-  const std::uint32_t* leaf_references(const BoxNode& leaf) const { return references_.data() + leaf.first(); }
+  const std::uint32_t* leaf_references(const BoxNode& leaf) const {
+    return references_.data() + leaf.first();
+  }
   /// Bytes held: the boxes (24 each), the nodes (8 each), the references (4 each) and the leaf blocks
   /// (96 bytes per 4 references: a copy of each leaf's boxes, tested without an indirection).
   std::size_t memory_bytes() const {
