@@ -93,8 +93,9 @@ inline std::vector<BoxRef> root_references(const std::vector<Box3f>& boxes) {
 }
 
 /// A node as the builds write it: depth first, an inner node's left child next to it and its right
-/// child's index stored; a leaf's first reference and count. The final layout (layout.hpp) turns
-/// these into BoxNodes with adjacent children.
+/// child's index stored; a leaf's first reference and count (into TreeWriter::references, unpadded).
+/// The layout pass (layout.hpp) turns these, one for one and in the same order, into 8-byte BoxNodes,
+/// pads each leaf's references to a multiple of 4 and copies its boxes into LeafBlocks.
 struct BuiltNode {
   float split = 0;          ///< inner nodes
   std::uint32_t first = 0;  ///< leaf: first reference
@@ -153,8 +154,8 @@ class TreeWriter {
 
  private:
   static void check_limits(std::size_t node_count, std::size_t reference_count) {
-    // The final layout pads each leaf's references to a multiple of 4 (at most 4 times as many, in
-    // 32 bits) and may leave node slots unused (at most 4 times as many, in 30 bits).
+    // The layout pass pads each leaf's references to a multiple of 4 (at most 4 times as many, still
+    // within 32 bits); a BoxNode keeps its right child's index in 30 bits, far above this cap.
     if (node_count >= (std::size_t{1} << 28) || reference_count >= (std::size_t{1} << 30))
       throw Error("box tree too large: more than 2^28 nodes or 2^30 box references (lower max_depth)");
   }
