@@ -118,35 +118,45 @@ struct Minkowski {
   }
 };
 
-/// The internal distance between two points of `dim` coordinates.
+/// Combines the terms of `dim` axes (term_of(i): the metric's term of axis i) in the one fixed order
+/// that internal_distance uses. From 8 axes on, lane j of 8 independent accumulators takes axes j,
+/// j+8, j+16, ... and the lanes are combined pairwise in a fixed order: the lanes are independent, so
+/// the compiler keeps them in vector registers (the order of the additions, hence the result, is the
+/// same with or without vector instructions). The remaining axes, and all of them below 8, are added
+/// one by one. (accumulate has no state in any metric, Minkowski included.)
 ///
-/// This one function is used by the tree, by brute_force_knn, by the blocked scan's re-check and by
-/// the tests, always in the same order of operations, so "exact" can be checked bit for bit. From 8
-/// coordinates on, lane j of 8 independent accumulators takes axes j, j+8, j+16, ... and the lanes
-/// are combined pairwise in a fixed order: the lanes are independent, so the compiler keeps them in
-/// vector registers (the order of the additions, hence the result, is the same with or without
-/// vector instructions). The remaining axes, and all of them below 8, are added one by one.
-///
-/// `b` may hold another type than `a` (PointForest keeps byte-valued data as bytes): its values are
-/// converted to T exactly, so the result is the one for those values stored as T, bit for bit.
-template <class Metric, class T, class U>
-inline T internal_distance(const Metric& metric, const T* a, const U* b, std::size_t dim) {
+/// Rounding is monotone and so is every combination step, so terms that are each no larger (no
+/// smaller) than a point pair's terms combine, in this order, to a value no larger (no smaller) than
+/// that pair's internal distance, bit for bit. The dual-tree joins rely on this to bound a pair of
+/// cells without a rounding margin (joins/space.hpp).
+template <class Metric, class T, class TermOf>
+inline T combine_axes(std::size_t dim, TermOf&& term_of) {
   constexpr std::size_t lanes = 8;
   const std::size_t blocks = dim / lanes;
   T total = 0;
   if (blocks > 0) {
     T acc[lanes] = {};
-    for (std::size_t block = 0; block < blocks; ++block) {
-      const T* x = a + block * lanes;
-      const U* y = b + block * lanes;
-      for (std::size_t j = 0; j < lanes; ++j) acc[j] = metric.accumulate(acc[j], metric.term(x[j] - static_cast<T>(y[j])));
-    }
+    for (std::size_t block = 0; block < blocks; ++block)
+      for (std::size_t j = 0; j < lanes; ++j) acc[j] = Metric::accumulate(acc[j], T(term_of(block * lanes + j)));
     for (std::size_t width = lanes / 2; width > 0; width /= 2)
-      for (std::size_t j = 0; j < width; ++j) acc[j] = metric.accumulate(acc[j], acc[j + width]);
+      for (std::size_t j = 0; j < width; ++j) acc[j] = Metric::accumulate(acc[j], acc[j + width]);
     total = acc[0];
   }
-  for (std::size_t i = blocks * lanes; i < dim; ++i) total = metric.accumulate(total, metric.term(a[i] - static_cast<T>(b[i])));
+  for (std::size_t i = blocks * lanes; i < dim; ++i) total = Metric::accumulate(total, T(term_of(i)));
   return total;
+}
+
+/// The internal distance between two points of `dim` coordinates.
+///
+/// This one function is used by the tree, by brute_force_knn, by the blocked scan's re-check and by
+/// the tests, always in the same order of operations (combine_axes), so "exact" can be checked bit
+/// for bit.
+///
+/// `b` may hold another type than `a` (PointForest keeps byte-valued data as bytes): its values are
+/// converted to T exactly, so the result is the one for those values stored as T, bit for bit.
+template <class Metric, class T, class U>
+inline T internal_distance(const Metric& metric, const T* a, const U* b, std::size_t dim) {
+  return combine_axes<Metric, T>(dim, [&](std::size_t i) { return metric.term(a[i] - static_cast<T>(b[i])); });
 }
 
 /// The same for a metric without state (L2, L1, Linf): internal_distance<L2>(a, b, dim).

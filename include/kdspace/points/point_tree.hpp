@@ -259,6 +259,9 @@ class PointTree {
   const std::vector<Node>& nodes() const { return nodes_; }
   /// The original index of each point in leaf order: a leaf holds leaf_order()[first, first + count).
   const std::vector<Index>& leaf_order() const { return order_; }
+  /// The points in leaf order (row-major; a leaf holds rows [first, first + count)): with nodes()
+  /// and leaf_order(), what a traversal outside the tree (the dual-tree joins) reads.
+  const std::vector<T>& points_in_leaf_order() const { return points_; }
 
  private:
   // ---- validation ---------------------------------------------------------------------------------

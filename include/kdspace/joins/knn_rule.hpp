@@ -1,0 +1,183 @@
+// The k-NN join rule: for every query point its k nearest reference points (the first k in the order
+// (internal distance, index), as PointTree::knn), or, in a self-join, its k nearest other points.
+//
+// Each query point keeps its k best candidates in a flat table; a query node keeps
+// B(N_q), the largest k-th candidate distance over its points (+inf while one has fewer than k): the
+// first bound of Curtin et al. 2013, section 4 (Gray and Moore's all-nearest-neighbour bound). A pair
+// (N_q, N_r) is pruned when the lower bound of its cells exceeds B(N_q): then no reference point in
+// N_r can enter any heap of N_q, not even by a tie on index. The bound being exact (space.hpp), the
+// result does not depend on the order of the visits, so it is the same on any number of threads.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "kdspace/joins/bounded_tree.hpp"
+#include "kdspace/joins/join_stats.hpp"
+#include "kdspace/joins/traversal.hpp"
+#include "kdspace/points/detail/result_sets.hpp"
+
+namespace kdspace::detail {
+
+/// The k best candidates of each of n query points: row i is candidates[i * k, i * k + k); kth(i) is
+/// the distance of its k-th once it holds k, +inf before.
+///
+/// For k up to sorted_rows_up_to a row is kept in result order ((distance, index) ascending): a join
+/// offers each point a few dozen candidates, most refused by one comparison with kth(i), and an
+/// accepted one moves the few entries after its place (for k = 10 about a quarter of the instructions
+/// of a heap's pop and push, and no sort at the end). Larger rows are max-heaps in that order (what
+/// KnnResults does), as moving half a long row per accepted candidate would cost O(k).
+template <class T>
+class KnnTable {
+ public:
+  static constexpr std::size_t sorted_rows_up_to = 32;
+
+  KnnTable(std::size_t n, std::size_t k)
+      : k_(k), sorted_rows_(k <= sorted_rows_up_to), candidates_(n * k), sizes_(n, 0),
+        kth_(n, std::numeric_limits<T>::infinity()) {}
+
+  T kth(std::size_t i) const { return kth_[i]; }
+
+  /// Offers a candidate to row i: kept when the row holds fewer than k or it comes before the k-th
+  /// in (distance, index) order (the decision of KnnResults::offer); false when refused.
+  bool offer(std::size_t i, T dist, std::uint32_t index) {
+    Candidate<T>* row = candidates_.data() + i * k_;
+    std::uint32_t& size = sizes_[i];
+    const Candidate<T> c{dist, index};
+    if (sorted_rows_) {
+      std::size_t place;
+      if (size < k_) {
+        place = size++;
+      } else {
+        if (!comes_before(c, row[k_ - 1])) return false;
+        place = k_ - 1;
+      }
+      for (; place > 0 && comes_before(c, row[place - 1]); --place) row[place] = row[place - 1];
+      row[place] = c;
+      if (size == k_) kth_[i] = row[k_ - 1].dist;
+      return true;
+    }
+    if (size < k_) {
+      row[size++] = c;
+      std::push_heap(row, row + size, comes_before);
+    } else {
+      if (!comes_before(c, row[0])) return false;
+      std::pop_heap(row, row + k_, comes_before);
+      row[k_ - 1] = c;
+      std::push_heap(row, row + k_, comes_before);
+    }
+    if (size == k_) kth_[i] = row[0].dist;
+    return true;
+  }
+
+  /// Row i in result order (once all offers are made).
+  const Candidate<T>* sorted_row(std::size_t i) {
+    Candidate<T>* row = candidates_.data() + i * k_;
+    if (!sorted_rows_) std::sort_heap(row, row + sizes_[i], comes_before);
+    return row;
+  }
+
+ private:
+  std::size_t k_;
+  bool sorted_rows_;
+  std::vector<Candidate<T>> candidates_;
+  std::vector<std::uint32_t> sizes_;
+  std::vector<T> kth_;
+};
+
+template <class T, int Dim, class Space>
+class KnnRule {
+ public:
+  using Tree = BoundedTree<T, Dim>;
+  struct Context {};
+  static constexpr bool nearest_first = true;
+
+  /// `table` rows are the query tree's leaf-order positions; `node_bound` holds B(N_q) per query node
+  /// (+inf to start). self: queries and reference are the same tree, and a point is not its own
+  /// neighbour.
+  KnnRule(const Tree& queries, const Tree& reference, const Space& space, bool self, KnnTable<T>& table,
+          std::vector<T>& node_bound, JoinStats& stats)
+      : queries_(queries),
+        reference_(reference),
+        space_(space),
+        self_(self),
+        table_(table),
+        node_bound_(node_bound),
+        stats_(stats) {}
+
+  const Tree& query_tree() const { return queries_; }
+  const Tree& reference_tree() const { return reference_; }
+
+  JoinScore<T, Context> score(std::uint32_t q, std::uint32_t r, const Context&) const {
+    const T lower = space_.lower(queries_.lo(q), queries_.hi(q), reference_.lo(r), reference_.hi(r), dim());
+    return {!(lower > node_bound_[q]), lower, {}};
+  }
+
+  bool rescore(std::uint32_t q, std::uint32_t, T key) const { return !(key > node_bound_[q]); }
+
+  void base_case(std::uint32_t q, std::uint32_t r, const Context&) {
+    const auto& qn = queries_.node(q);
+    const auto& rn = reference_.node(r);
+    const bool same_leaf = self_ && q == r;
+    const T* rlo = reference_.lo(r);
+    const T* rhi = reference_.hi(r);
+    T leaf_bound = 0;
+    for (std::uint32_t i = qn.begin; i < qn.end; ++i) {
+      const T* a = queries_.point(i);
+      T kth = table_.kth(i);
+      // The leaf's box may lie beyond this point's k-th even when it does not beyond the node's bound.
+      if (!(space_.lower(a, a, rlo, rhi, dim()) > kth)) {
+        if (rn.all_identical) {
+          kth = offer_identical(i, a, rn);
+        } else {
+          stats_.distances += rn.count() - (same_leaf ? 1 : 0);
+          for (std::uint32_t j = rn.begin; j < rn.end; ++j) {
+            if (same_leaf && j == i) continue;
+            const T d = space_.distance(a, reference_.point(j), dim());
+            if (d <= kth && table_.offer(i, d, reference_.index(j))) kth = table_.kth(i);
+          }
+        }
+      }
+      leaf_bound = std::max(leaf_bound, kth);
+    }
+    node_bound_[q] = leaf_bound;
+  }
+
+  void query_done(std::uint32_t q) {
+    const auto& node = queries_.node(q);
+    node_bound_[q] = std::max(bound_of(node.left), bound_of(node.right));
+  }
+
+ private:
+  std::size_t dim() const { return queries_.dim(); }
+
+  // An empty child never bounds its parent.
+  T bound_of(std::uint32_t child) const {
+    return queries_.node(child).count() == 0 ? T(0) : node_bound_[child];
+  }
+
+  // A leaf of coinciding points: one distance serves all, and as their indices ascend the first
+  // refusal ends the offers.
+  T offer_identical(std::uint32_t i, const T* a, const typename Tree::Node& rn) {
+    const T d = space_.distance(a, reference_.point(rn.begin), dim());
+    ++stats_.distances;
+    for (std::uint32_t j = rn.begin; j < rn.end; ++j) {
+      if (self_ && j == i) continue;
+      if (!table_.offer(i, d, reference_.index(j))) break;
+    }
+    return table_.kth(i);
+  }
+
+  const Tree& queries_;
+  const Tree& reference_;
+  const Space& space_;
+  bool self_;
+  KnnTable<T>& table_;
+  std::vector<T>& node_bound_;
+  JoinStats& stats_;
+};
+
+}  // namespace kdspace::detail

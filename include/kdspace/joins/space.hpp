@@ -1,0 +1,137 @@
+// The space distances are measured in: ordinary space (FlatSpace) or a torus with a period on some
+// axes (TorusSpace, periodic boundaries). Each gives the internal distance of two points and, for two
+// axis-aligned boxes, a lower and an upper bound on the internal distance of any point of one to any
+// point of the other.
+//
+// Exactness without a margin. Every value here is combined over the axes by combine_axes (metric.hpp),
+// the order internal_distance uses. A bound's term on each axis is computed with the same rounded
+// operations as a point pair's term, from box corners instead of coordinates; as rounding is monotone,
+// the bound's term is no larger (lower bound) or no smaller (upper bound) than the point pair's term,
+// and so is their combination. A pair of cells is therefore pruned, or counted whole, by comparing its
+// bound with a radius or a k-th distance directly, and never loses or adds a point, even at equal
+// distances. (This relies on IEEE arithmetic without contraction into fused multiply-adds, which ISO
+// C++ mode, -std=c++17, gives with GCC and Clang.)
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "kdspace/error.hpp"
+#include "kdspace/metric.hpp"
+
+namespace kdspace::detail {
+
+/// Ordinary space: internal_distance.
+template <class Metric>
+struct FlatSpace {
+  template <class T>
+  T distance(const T* a, const T* b, std::size_t dim) const {
+    return internal_distance<Metric>(a, b, dim);
+  }
+
+  /// No larger than the distance of any point of box A = [alo, ahi] to any point of box B.
+  /// Axis term: the gap between the two intervals (0 where they overlap). For a in A and b in B,
+  /// b - a >= blo - ahi, so fl(b - a) >= fl(blo - ahi), and likewise the other way.
+  template <class T>
+  T lower(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
+    return combine_axes<Metric, T>(dim, [&](std::size_t i) {
+      return Metric::term(std::max(std::max(blo[i] - ahi[i], alo[i] - bhi[i]), T(0)));
+    });
+  }
+
+  /// No smaller than the distance of any point of A to any point of B. Axis term: the widest span.
+  template <class T>
+  T upper(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
+    return combine_axes<Metric, T>(dim, [&](std::size_t i) { return Metric::term(std::max(bhi[i] - alo[i], ahi[i] - blo[i])); });
+  }
+};
+
+/// A torus: on axis i with period L (points in [0, L)) the coordinate difference d counts as
+/// min(|d|, L - |d|), as in SciPy's cKDTree with `boxsize`. Axes that are not periodic have L = +inf,
+/// where the same formula gives |d| (and, with |d| = inf, std::min keeps |d| against inf - inf = NaN),
+/// so a torus without periodic axes gives FlatSpace's values bit for bit.
+template <class Metric, class T>
+struct TorusSpace {
+  const T* period;  ///< dim values: L, or +inf
+
+  T distance(const T* a, const T* b, std::size_t dim) const {
+    return combine_axes<Metric, T>(dim, [&](std::size_t i) {
+      const T d = std::abs(a[i] - b[i]);
+      return Metric::term(std::min(d, period[i] - d));
+    });
+  }
+
+  /// With gap g and span u of the plain intervals: g <= |d| <= u, so fl(L - |d|) >= fl(L - u) and the
+  /// wrapped difference min(|d|, L - |d|) is at least min(g, L - u) and at most min(u, L - g).
+  T lower(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
+    return combine_axes<Metric, T>(dim, [&](std::size_t i) {
+      const T gap = std::max(std::max(blo[i] - ahi[i], alo[i] - bhi[i]), T(0));
+      const T span = std::max(bhi[i] - alo[i], ahi[i] - blo[i]);
+      return Metric::term(std::min(gap, period[i] - span));
+    });
+  }
+
+  T upper(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
+    return combine_axes<Metric, T>(dim, [&](std::size_t i) {
+      const T gap = std::max(std::max(blo[i] - ahi[i], alo[i] - bhi[i]), T(0));
+      const T span = std::max(bhi[i] - alo[i], ahi[i] - blo[i]);
+      return Metric::term(std::min(span, period[i] - gap));
+    });
+  }
+};
+
+/// The period of each axis from a box size given by the user: one value for every axis, or one per
+/// axis; 0 means "not periodic" (as in SciPy). Empty when no axis is periodic. Throws Error for a
+/// negative, NaN or infinite size, a size T cannot hold, or a count that is neither 1 nor dim.
+template <class T>
+std::vector<T> periods_from_boxsize(const std::vector<double>& boxsize, std::size_t dim) {
+  if (boxsize.empty()) return {};
+  if (boxsize.size() != 1 && boxsize.size() != dim)
+    throw Error("boxsize has " + std::to_string(boxsize.size()) + " values; give one, or one per axis (" +
+                std::to_string(dim) + ")");
+  std::vector<T> period(dim, std::numeric_limits<T>::infinity());
+  bool any = false;
+  for (std::size_t i = 0; i < dim; ++i) {
+    const double size = boxsize[boxsize.size() == 1 ? 0 : i];
+    if (!(size >= 0) || !std::isfinite(size))
+      throw Error("boxsize of axis " + std::to_string(i + 1) + " must be a finite number >= 0 (0: not periodic), got " +
+                  std::to_string(size));
+    if (size > static_cast<double>(std::numeric_limits<T>::max()))
+      throw Error("boxsize of axis " + std::to_string(i + 1) + " is beyond the range of the points' type");
+    if (size > 0) {
+      period[i] = static_cast<T>(size);
+      any = true;
+    }
+  }
+  if (!any) return {};
+  return period;
+}
+
+/// "row R: coordinate A = v lies outside the periodic box [0, L)" (row and axis 0-based here,
+/// 1-based in the message).
+template <class T>
+Error outside_box(std::size_t row, std::size_t axis, T value, T period) {
+  return Error("row " + std::to_string(row + 1) + ": coordinate " + std::to_string(axis + 1) + " = " +
+               std::to_string(value) + " lies outside the periodic box [0, " + std::to_string(period) + ")");
+}
+
+/// Whether a coordinate lies in [0, L) on a periodic axis; any finite coordinate on another (L = +inf).
+template <class T>
+bool inside_period(T v, T period) {
+  return std::isinf(period) || (v >= 0 && v < period);
+}
+
+/// Checks that every point lies in [0, L) on each periodic axis; else outside_box for the first.
+template <class T>
+void check_in_box(const T* rows, std::size_t n, std::size_t dim, const std::vector<T>& period) {
+  if (period.empty()) return;
+  for (std::size_t r = 0; r < n; ++r)
+    for (std::size_t a = 0; a < dim; ++a)
+      if (!inside_period(rows[r * dim + a], period[a])) throw outside_box(r, a, rows[r * dim + a], period[a]);
+}
+
+}  // namespace kdspace::detail

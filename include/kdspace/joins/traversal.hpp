@@ -1,0 +1,120 @@
+// The dual-tree traversal: one depth-first walk over pairs (query node, reference node) that knows
+// nothing of what is computed. A rule says it (Curtin, March, Ram, Anderson, Gray, Isbell: "Tree-
+// Independent Dual-Tree Algorithms", ICML 2013; mlpack's split of traversal and rules):
+//
+//   score(q, r, context)    -> JoinScore: whether to visit the pair (a rule may also settle the whole
+//                              pair there, e.g. count every pair when the cells lie within the radius,
+//                              and decline the visit), an ordering key, and the context the pair's
+//                              descendants inherit (the radii still undecided, for counting)
+//   rescore(q, r, key)      -> whether a pair scored earlier is still worth visiting (a k-NN bound
+//                              may have shrunk while its sibling was visited)
+//   base_case(q, r, context)   two leaves: compare their points
+//   query_done(q)              both children of query node q are done (k-NN: refresh q's bound)
+//   nearest_first              visit the nearer reference child first (k-NN) or in tree order
+//
+// Which node to split (mlpack's dual depth-first order): both when neither is a leaf, so that each
+// query child meets first the reference child nearest to it (in a self-join, itself), which gives its
+// points good k-th distances early; else the one that is not a leaf. Empty nodes (the empty side of a
+// `middle` split) are never scored.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+#include "kdspace/joins/join_stats.hpp"
+
+namespace kdspace::detail {
+
+template <class T, class Context>
+struct JoinScore {
+  bool visit;
+  T key;  ///< a lower bound on the pair's distances: the nearer pair goes first when the rule asks
+  Context context;
+};
+
+template <class Rule>
+class DualTraversal {
+ public:
+  using Context = typename Rule::Context;
+
+  DualTraversal(Rule& rule, JoinStats& stats) : rule_(rule), stats_(stats) {}
+
+  /// Visits the pairs below (q, r), starting with the rule's score of (q, r) itself.
+  void run(std::uint32_t q, std::uint32_t r, const Context& context) {
+    const auto s = score(q, r, context);
+    if (s.visit) traverse(q, r, s.context);
+  }
+
+ private:
+  using Score = decltype(std::declval<Rule&>().score(0u, 0u, std::declval<const Context&>()));
+
+  Score score(std::uint32_t q, std::uint32_t r, const Context& context) {
+    if (rule_.query_tree().node(q).count() == 0 || rule_.reference_tree().node(r).count() == 0)
+      return Score{false, {}, context};
+    ++stats_.node_pairs;
+    return rule_.score(q, r, context);
+  }
+
+  void traverse(std::uint32_t q, std::uint32_t r, const Context& context) {
+    const auto& qn = rule_.query_tree().node(q);
+    const auto& rn = rule_.reference_tree().node(r);
+    if (qn.is_leaf() && rn.is_leaf()) {
+      ++stats_.leaf_pairs;
+      rule_.base_case(q, r, context);
+      return;
+    }
+    if (qn.is_leaf()) {
+      visit_reference_children(q, rn, context);
+      return;
+    }
+    for (const std::uint32_t child : {qn.left, qn.right}) {
+      if (rn.is_leaf()) {
+        const Score s = score(child, r, context);
+        if (s.visit) traverse(child, r, s.context);
+      } else {
+        visit_reference_children(child, rn, context);
+      }
+    }
+    rule_.query_done(q);
+  }
+
+  // Scores (q, both children of rn) and visits them, the nearer first when the rule asks.
+  template <class Node>
+  void visit_reference_children(std::uint32_t q, const Node& rn, const Context& context) {
+    std::uint32_t first = rn.left, second = rn.right;
+    Score first_score = score(q, first, context), second_score = score(q, second, context);
+    if (Rule::nearest_first && second_score.key < first_score.key) {
+      std::swap(first, second);
+      std::swap(first_score, second_score);
+    }
+    if (first_score.visit) traverse(q, first, first_score.context);
+    if (second_score.visit && rule_.rescore(q, second, second_score.key)) traverse(q, second, second_score.context);
+  }
+
+  Rule& rule_;
+  JoinStats& stats_;
+};
+
+/// The query subtrees a join's work is split into, in depth-first order: the largest subtrees of at
+/// most `max_points` points. They depend on the tree only, never on the number of threads, so the
+/// work (and any floating-point sum taken per subtree) is the same on any number of threads.
+template <class Tree>
+std::vector<std::uint32_t> task_roots(const Tree& tree, std::size_t max_points) {
+  std::vector<std::uint32_t> roots, stack{0};
+  while (!stack.empty()) {
+    const std::uint32_t id = stack.back();
+    stack.pop_back();
+    const auto& node = tree.node(id);
+    if (node.is_leaf() || node.count() <= max_points) {
+      if (node.count() > 0) roots.push_back(id);
+      continue;
+    }
+    stack.push_back(node.right);
+    stack.push_back(node.left);
+  }
+  return roots;
+}
+
+}  // namespace kdspace::detail

@@ -1,0 +1,269 @@
+// Dual-tree joins: k-NN joins, self-joins, pairs within r, distances within r and pair counts are
+// checked bit for bit against brute force (and against the single-tree queries), in ordinary space
+// and on a torus, on uniform, clustered, duplicate-heavy, gridded, identical and flat data.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "kdspace/joins/joins.hpp"
+#include "support.hpp"
+
+namespace {
+
+using kdspace::IndexPair;
+using kdspace::JoinParams;
+using kdspace::Neighbor;
+using kdspace::PointTree;
+using kdspace_test::make_points;
+using kdspace_test::Shape;
+
+/// The periods of a torus (+inf: not periodic) and the points moved into [0, L) on periodic axes.
+template <class T>
+struct Torus {
+  std::vector<double> boxsize;  // as given to the joins
+  std::vector<T> period;        // L, or +inf
+
+  Torus(std::vector<double> sizes, std::size_t dim) : boxsize(std::move(sizes)) {
+    for (std::size_t a = 0; a < dim; ++a) {
+      const double L = boxsize.empty() ? 0 : boxsize[boxsize.size() == 1 ? 0 : a];
+      period.push_back(L > 0 ? static_cast<T>(L) : std::numeric_limits<T>::infinity());
+    }
+  }
+  bool periodic() const { return !boxsize.empty(); }
+
+  void wrap(std::vector<T>& points) const {
+    const std::size_t dim = period.size();
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const T L = period[i % dim];
+      if (std::isinf(L)) continue;
+      T v = points[i] - std::floor(points[i] / L) * L;
+      if (!(v >= 0 && v < L)) v = 0;
+      points[i] = v;
+    }
+  }
+
+  /// The reference distance: per axis min(|d|, L - |d|) (|d| where not periodic), combined in the
+  /// documented order of internal_distance.
+  template <class Metric>
+  T distance(const T* a, const T* b) const {
+    return kdspace::combine_axes<Metric, T>(period.size(), [&](std::size_t i) {
+      const T d = std::abs(a[i] - b[i]);
+      return Metric::term(std::isinf(period[i]) ? d : std::min(d, period[i] - d));
+    });
+  }
+};
+
+template <class T>
+struct Candidate {
+  T dist;
+  std::uint32_t index;
+  bool operator<(const Candidate& o) const { return dist < o.dist || (dist == o.dist && index < o.index); }
+};
+
+/// Every internal distance between the rows of a and b, computed once per case: row i of a against
+/// all of b.
+template <class T>
+struct DistanceTable {
+  std::size_t rows, cols;
+  std::vector<T> dist;
+
+  template <class Metric>
+  static DistanceTable make(const Torus<T>& space, const std::vector<T>& a, const std::vector<T>& b) {
+    const std::size_t dim = space.period.size();
+    DistanceTable t{a.size() / dim, b.size() / dim, {}};
+    t.dist.resize(t.rows * t.cols);
+    for (std::size_t i = 0; i < t.rows; ++i)
+      for (std::size_t j = 0; j < t.cols; ++j) t.dist[i * t.cols + j] = space.template distance<Metric>(&a[i * dim], &b[j * dim]);
+    return t;
+  }
+  T at(std::size_t i, std::size_t j) const { return dist[i * cols + j]; }
+};
+
+/// Brute force: for each row, the k first columns in (distance, index) order; with self, a row
+/// skips its own column.
+template <class Metric, class T>
+std::vector<std::vector<Neighbor<T>>> brute_knn(const DistanceTable<T>& table, std::size_t k, bool self) {
+  std::vector<std::vector<Neighbor<T>>> out(table.rows);
+  std::vector<Candidate<T>> all;
+  for (std::size_t i = 0; i < table.rows; ++i) {
+    all.clear();
+    for (std::size_t j = 0; j < table.cols; ++j)
+      if (!self || j != i) all.push_back({table.at(i, j), static_cast<std::uint32_t>(j)});
+    std::partial_sort(all.begin(), all.begin() + static_cast<std::ptrdiff_t>(k), all.end());
+    for (std::size_t r = 0; r < k; ++r) out[i].push_back({all[r].index, Metric::to_distance(all[r].dist)});
+  }
+  return out;
+}
+
+/// Brute force: the pairs within r (closed), (a, b) sorted; self: a < b.
+template <class Metric, class T>
+std::vector<kdspace::PairDistance<T>> brute_pairs(const DistanceTable<T>& table, bool self, T r) {
+  const T limit = Metric::to_internal(r);
+  std::vector<kdspace::PairDistance<T>> out;
+  for (std::size_t i = 0; i < table.rows; ++i)
+    for (std::size_t j = self ? i + 1 : 0; j < table.cols; ++j)
+      if (table.at(i, j) <= limit)
+        out.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j), Metric::to_distance(table.at(i, j))});
+  return out;
+}
+
+template <class T>
+std::vector<IndexPair> indices_of(const std::vector<kdspace::PairDistance<T>>& pairs) {
+  std::vector<IndexPair> out;
+  for (const auto& p : pairs) out.push_back({p.a, p.b});
+  return out;
+}
+
+template <class T>
+std::string first_row_difference(const kdspace::NeighborLists<T>& got, const std::vector<std::vector<Neighbor<T>>>& want) {
+  if (got.rows() != want.size()) return "row count " + std::to_string(got.rows()) + " vs " + std::to_string(want.size());
+  for (std::size_t q = 0; q < want.size(); ++q) {
+    const auto row = got.row(q);
+    if (row.size() != want[q].size()) return "row " + std::to_string(q) + ": " + std::to_string(row.size()) + " results, expected " + std::to_string(want[q].size());
+    for (std::size_t i = 0; i < row.size(); ++i)
+      if (!(row[i] == want[q][i]))
+        return "row " + std::to_string(q) + " rank " + std::to_string(i) + ": index " + std::to_string(row[i].index) +
+               " at " + std::to_string(row[i].distance) + ", brute force index " + std::to_string(want[q][i].index) +
+               " at " + std::to_string(want[q][i].distance);
+  }
+  return "";
+}
+
+/// A few radii: 0, and exactly at some pair distances (the internal distance decides) and one step
+/// either side of them.
+template <class Metric, class T>
+std::vector<T> probing_radii(const Torus<T>& space, const std::vector<T>& points, std::uint32_t seed) {
+  const std::size_t dim = space.period.size(), n = points.size() / dim;
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<std::size_t> pick(0, n - 1);
+  std::vector<T> radii{T(0)};
+  for (int i = 0; i < 2; ++i) {
+    // The true distance of a pair whose internal distance round-trips through it.
+    const T d = Metric::to_distance(space.template distance<Metric>(&points[pick(rng) * dim], &points[pick(rng) * dim]));
+    radii.push_back(d);
+    radii.push_back(std::nextafter(d, T(0)));
+    radii.push_back(std::nextafter(d, std::numeric_limits<T>::infinity()));
+  }
+  return radii;
+}
+
+struct Case {
+  Shape shape;
+  std::size_t n;
+  std::size_t dim;
+};
+
+const Case cases[] = {
+    {Shape::uniform, 400, 1},    {Shape::uniform, 500, 3},    {Shape::clustered, 500, 3},  {Shape::duplicates, 400, 2},
+    {Shape::grid, 400, 3},       {Shape::identical, 200, 4},  {Shape::flat, 400, 5},       {Shape::uniform, 300, 9},
+    {Shape::clustered, 300, 17}, {Shape::grid, 200, 64},      {Shape::sorted_x, 300, 2},   {Shape::uniform, 1, 3},
+};
+
+template <class T>
+std::vector<double> boxsize_for(Shape shape, std::size_t dim, bool periodic) {
+  if (!periodic) return {};
+  if (shape == Shape::grid) return {5.0};  // integer points mod 5: many pairs at exactly L / 2
+  std::vector<double> sizes(dim, 1.5);
+  if (dim > 1) sizes[dim / 2] = 0;  // one axis not periodic
+  return sizes;
+}
+
+/// Runs every join on one case and checks it against brute force.
+template <class T, class Metric>
+void check_case(const Case& c, bool periodic, std::uint32_t seed) {
+  CAPTURE(kdspace_test::name(c.shape), c.n, c.dim, periodic, Metric::name, kdspace_test::type_name<T>());
+  const Torus<T> space(boxsize_for<T>(c.shape, c.dim, periodic), c.dim);
+  std::vector<T> points = make_points<T>(c.shape, c.n, c.dim, seed);
+  std::vector<T> others = make_points<T>(c.shape == Shape::identical ? Shape::uniform : c.shape, c.n / 2 + 1, c.dim, seed + 1);
+  space.wrap(points);
+  space.wrap(others);
+  const std::size_t n = c.n, m = others.size() / c.dim;
+  kdspace::BuildParams build;
+  build.leaf_size = 1 + seed % 12;  // small leaves: deep trees, many node pairs
+  const PointTree<T, kdspace::Dynamic, Metric> tree(points.data(), n, c.dim, build);
+  const PointTree<T, kdspace::Dynamic, Metric> other_tree(others.data(), m, c.dim, build);
+  JoinParams params;
+  params.threads = 1;
+  params.boxsize = space.boxsize;
+
+  const auto self_table = DistanceTable<T>::template make<Metric>(space, points, points);
+  const auto cross_table = DistanceTable<T>::template make<Metric>(space, others, points);
+  const auto pair_table = DistanceTable<T>::template make<Metric>(space, points, others);
+  for (std::size_t k : {std::size_t{1}, std::size_t{4}, n - 1}) {
+    if (k == 0 || k > n - 1) continue;
+    CAPTURE(k);
+    REQUIRE(first_row_difference(kdspace::self_knn_join(tree, k, params), brute_knn<Metric>(self_table, k, true)) == "");
+  }
+  for (std::size_t k : {std::size_t{1}, std::size_t{3}, n}) {
+    if (k > n) continue;
+    CAPTURE(k);
+    REQUIRE(first_row_difference(kdspace::knn_join(other_tree, tree, k, params), brute_knn<Metric>(cross_table, k, false)) ==
+            "");
+  }
+  for (const T r : probing_radii<Metric>(space, points, seed)) {
+    CAPTURE(r);
+    const auto self_want = brute_pairs<Metric>(self_table, true, r);
+    const auto cross_want = brute_pairs<Metric>(pair_table, false, r);
+    REQUIRE(kdspace::distances_within(tree, r, params) == self_want);
+    REQUIRE(kdspace::distances_within(tree, other_tree, r, params) == cross_want);
+    REQUIRE(kdspace::pairs_within(tree, r, params) == indices_of(self_want));
+    REQUIRE(kdspace::pairs_within(tree, other_tree, r, params) == indices_of(cross_want));
+  }
+  // Counts at all probing radii in one call, in scrambled order, against the brute-force pair lists.
+  std::vector<T> radii = probing_radii<Metric>(space, points, seed + 7);
+  radii.push_back(std::numeric_limits<T>::infinity());
+  std::reverse(radii.begin(), radii.end());
+  std::swap(radii[1], radii[4]);
+  const auto self_counts = kdspace::count_pairs(tree, radii, params);
+  const auto cross_counts = kdspace::count_pairs(tree, other_tree, radii, params);
+  std::vector<double> weights(n), other_weights(m);
+  for (std::size_t i = 0; i < n; ++i) weights[i] = static_cast<double>(i % 5) - 1;
+  for (std::size_t i = 0; i < m; ++i) other_weights[i] = static_cast<double>(i % 3) + 0.5;
+  const auto self_sums = kdspace::count_weighted_pairs(tree, radii, weights.data(), params);
+  const auto cross_sums = kdspace::count_weighted_pairs(tree, other_tree, radii, weights.data(), other_weights.data(), params);
+  for (std::size_t j = 0; j < radii.size(); ++j) {
+    CAPTURE(radii[j]);
+    const auto self_want = brute_pairs<Metric>(self_table, true, radii[j]);
+    const auto cross_want = brute_pairs<Metric>(pair_table, false, radii[j]);
+    REQUIRE(self_counts[j] == self_want.size());
+    REQUIRE(cross_counts[j] == cross_want.size());
+    double self_sum = 0, cross_sum = 0;  // small integers and halves: exact in any order
+    for (const auto& p : self_want) self_sum += weights[p.a] * weights[p.b];
+    for (const auto& p : cross_want) cross_sum += weights[p.a] * other_weights[p.b];
+    REQUIRE(self_sums[j] == self_sum);
+    REQUIRE(cross_sums[j] == cross_sum);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("joins: every join equals brute force bit for bit in ordinary space", "[joins][exact]") {
+  std::uint32_t seed = 1;
+  for (const Case& c : cases) {
+    check_case<float, kdspace::L2>(c, false, seed++);
+    check_case<double, kdspace::L2>(c, false, seed++);
+  }
+}
+
+TEST_CASE("joins: every join equals brute force bit for bit on a torus", "[joins][exact][periodic]") {
+  std::uint32_t seed = 100;
+  for (const Case& c : cases) {
+    check_case<float, kdspace::L2>(c, true, seed++);
+    check_case<double, kdspace::L2>(c, true, seed++);
+  }
+}
+
+TEST_CASE("joins: L1 and Linf joins equal brute force flat and periodic", "[joins][exact][periodic]") {
+  std::uint32_t seed = 200;
+  for (const Case& c : {cases[1], cases[3], cases[4], cases[8]}) {
+    for (bool periodic : {false, true}) {
+      check_case<float, kdspace::L1>(c, periodic, seed++);
+      check_case<double, kdspace::Linf>(c, periodic, seed++);
+    }
+  }
+}
