@@ -19,6 +19,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <limits>
@@ -129,9 +130,12 @@ struct Minkowski {
 /// smaller) than a point pair's terms combine, in this order, to a value no larger (no smaller) than
 /// that pair's internal distance, bit for bit. The dual-tree joins rely on this to bound a pair of
 /// cells without a rounding margin (joins/space.hpp).
+/// The accumulators of combine_axes (and so of internal_distance).
+inline constexpr std::size_t distance_lanes = 8;
+
 template <class Metric, class T, class TermOf>
 inline T combine_axes(std::size_t dim, TermOf&& term_of) {
-  constexpr std::size_t lanes = 8;
+  constexpr std::size_t lanes = distance_lanes;
   const std::size_t blocks = dim / lanes;
   T total = 0;
   if (blocks > 0) {
@@ -143,6 +147,23 @@ inline T combine_axes(std::size_t dim, TermOf&& term_of) {
     total = acc[0];
   }
   for (std::size_t i = blocks * lanes; i < dim; ++i) total = Metric::accumulate(total, T(term_of(i)));
+  return total;
+}
+
+/// combine_axes for Count values at once: value j is combine_axes(dim, term_of(., j)), the same bits.
+/// Below 8 axes (no lanes) it goes axis by axis over the Count values, which compilers turn into
+/// vector instructions when the j-th terms lie next to each other (points stored by column); from 8
+/// axes on it is combine_axes itself, one j after the other.
+template <class Metric, std::size_t Count, class T, class TermOf>
+inline std::array<T, Count> combine_axes_many(std::size_t dim, TermOf&& term_of) {
+  std::array<T, Count> total{};
+  if (dim < distance_lanes) {
+    for (std::size_t i = 0; i < dim; ++i)
+      for (std::size_t j = 0; j < Count; ++j) total[j] = Metric::accumulate(total[j], T(term_of(i, j)));
+  } else {
+    for (std::size_t j = 0; j < Count; ++j)
+      total[j] = combine_axes<Metric, T>(dim, [&](std::size_t i) { return term_of(i, j); });
+  }
   return total;
 }
 

@@ -35,9 +35,11 @@ class BoundedTree {
     std::uint32_t count() const { return end - begin; }
   };
 
-  /// The nodes and boxes of `tree`, which must outlive this.
+  /// The nodes and boxes of `tree`, which must outlive this. Subtrees of at most `leaf_points`
+  /// points are taken as leaves (joins compare leaves point by point; larger ones than the tree's
+  /// mean fewer node pairs).
   template <class Metric>
-  explicit BoundedTree(const PointTree<T, Dim, Metric>& tree)
+  BoundedTree(const PointTree<T, Dim, Metric>& tree, std::size_t leaf_points)
       : dim_(tree.dim()),
         points_(tree.points_in_leaf_order().data()),
         indices_(tree.leaf_order().data()),
@@ -65,12 +67,29 @@ class BoundedTree {
         hi[a] = std::max(llo[dim_ + a], rlo[dim_ + a]);
       }
     }
+    // From the root down: small subtrees become leaves, and every leaf's points are stored by column.
+    column_offset_.assign(nodes_.size(), 0);
+    std::vector<std::uint32_t> stack{0};
+    while (!stack.empty()) {
+      const std::uint32_t id = stack.back();
+      Node& node = nodes_[id];
+      stack.pop_back();
+      if (!node.is_leaf() && node.count() > leaf_points) {
+        stack.push_back(node.right);
+        stack.push_back(node.left);
+        continue;
+      }
+      node.left = node.right = 0;
+      column_offset_[id] = columns_.size();
+      add_columns(node);
+    }
   }
 
   /// One point as a tree of one leaf (a single query); `point` must outlive this.
   BoundedTree(const T* point, std::size_t dim, const std::uint32_t* index)
-      : dim_(dim), points_(point), indices_(index), size_(1) {
+      : dim_(dim), points_(point), indices_(index), size_(1), column_offset_{0} {
     nodes_.push_back(Node{0, 1, 0, 0, false});
+    add_columns(nodes_[0]);
     boxes_.assign(point, point + dim);
     boxes_.insert(boxes_.end(), point, point + dim);
   }
@@ -87,6 +106,14 @@ class BoundedTree {
   /// The point at leaf-order position `pos`, and its original index.
   const T* point(std::size_t pos) const { return points_ + pos * dim(); }
   std::uint32_t index(std::size_t pos) const { return indices_[pos]; }
+  /// A leaf's points by column, in blocks of column_block: axis a of its point at position begin + j
+  /// is columns(leaf)[a * column_stride(leaf) + j]; the stride rounds the count up to whole blocks
+  /// (the padding repeats the last point).
+  const T* columns(std::uint32_t leaf) const { return columns_.data() + column_offset_[leaf]; }
+  static std::size_t column_stride(const Node& leaf) {
+    return (std::size_t{leaf.count()} + column_block - 1) / column_block * column_block;
+  }
+  static constexpr std::size_t column_block = 8;
 
  private:
   // An empty leaf (the empty side of a `middle` split) gets the empty box [+inf, -inf], which the
@@ -104,12 +131,23 @@ class BoundedTree {
     }
   }
 
+  void add_columns(const Node& leaf) {
+    const std::size_t stride = column_stride(leaf), start = columns_.size();
+    columns_.resize(start + stride * dim_);
+    for (std::size_t j = 0; j < stride; ++j) {
+      const T* p = points_ + (leaf.begin + std::min<std::size_t>(j, leaf.count() - 1)) * dim_;
+      for (std::size_t a = 0; a < dim_; ++a) columns_[start + a * stride + j] = p[a];
+    }
+  }
+
   std::size_t dim_;
   const T* points_;
   const std::uint32_t* indices_;
   std::size_t size_;
   std::vector<Node> nodes_;
-  std::vector<T> boxes_;  // node id: lo at [2 * id * dim, +dim), hi right after
+  std::vector<T> boxes_;    // node id: lo at [2 * id * dim, +dim), hi right after
+  std::vector<std::size_t> column_offset_;  // by node id, for leaves
+  std::vector<T> columns_;                  // each leaf's points by column
 };
 
 /// Checks that the points of `tree` lie in [0, L) on each periodic axis (period: L, or +inf);

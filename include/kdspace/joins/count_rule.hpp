@@ -111,27 +111,21 @@ class CountRule {
   void query_done(std::uint32_t) {}
 
   void base_case(std::uint32_t q, std::uint32_t r, const Context& context) {
-    const auto& qn = queries_.node(q);
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
-    const T* rlo = reference_.lo(r);
-    const T* rhi = reference_.hi(r);
     const T largest = radii_[context.hi];
-    for (std::uint32_t i = qn.begin; i < qn.end; ++i) {
-      const T* a = queries_.point(i);
-      if (space_.lower(a, a, rlo, rhi, dim()) > largest) continue;
+    bounds_to_box(queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t i, T lower) {
+      if (lower > largest) return;
       const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
       stats_.distances += rn.end - first;
-      for (std::uint32_t j = first; j < rn.end; ++j) {
-        const T d = space_.distance(a, reference_.point(j), dim());
-        if (d > largest) continue;
+      distances_to_leaf(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
         const std::uint32_t bin = first_at_least(context.lo, context.hi, d);
         if constexpr (std::is_same_v<Count, double>)
           bins_[bin] += query_weights_->by_position[i] * reference_weights_->by_position[j];
         else
           ++bins_[bin];
-      }
-    }
+      });
+    });
   }
 
  private:

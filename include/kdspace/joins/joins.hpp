@@ -61,6 +61,11 @@ struct PairDistance {
 
 namespace detail {
 
+// The largest subtrees a join takes as leaves, compared point by point.
+inline constexpr std::size_t knn_leaf_points = 16;
+inline constexpr std::size_t range_leaf_points = 16;
+inline constexpr std::size_t count_leaf_points = 16;
+
 /// The joins of one tree type; compiled once in the library for the common types.
 template <class T, int Dim, class Metric>
 struct Joins {
@@ -77,7 +82,7 @@ struct Joins {
     if (k > available)
       throw Error("k = " + std::to_string(k) + " exceeds the number of " + (self ? "other points (" : "points (") +
                   std::to_string(available) + ")");
-    const BoundedPair trees(queries, reference);
+    const BoundedPair trees(queries, reference, knn_leaf_points);
     const std::vector<T> period = trees.periods(params);
     return with_space(period, [&](const auto& space) {
       return knn_join_trees<Metric>(trees.first, trees.second(), k, self, space, params.threads, stats);
@@ -102,19 +107,19 @@ struct Joins {
     const T limit = internal_radius(r);
     const bool self = b == nullptr;
     check_pair(a, self ? a : *b);
-    const BoundedPair trees(a, b);
+    const BoundedPair trees(a, b, range_leaf_points);
     const std::vector<T> period = trees.periods(params);
     std::vector<IndexPair> found = with_space(period, [&](const auto& space) {
       return range_join_trees<PairSink, IndexPair>(trees.first, trees.second(), limit, self, space, params.threads, stats);
     });
-    sort_by_first_index(found, a.size(), [](const IndexPair& x, const IndexPair& y) { return x.b < y.b; });
+    sort_by_indices(found, a.size(), self ? a.size() : b->size());
     return found;
   }
 
   static std::vector<PairDistance<T>> distances(const Tree& a, const Tree* b, T r, const JoinParams& params,
                                                 JoinStats* stats) {
     std::vector<FoundPair<T>> found = found_within(a, b, r, params, stats);
-    sort_by_first_index(found, a.size(), [](const FoundPair<T>& x, const FoundPair<T>& y) { return x.b < y.b; });
+    sort_by_indices(found, a.size(), b ? b->size() : a.size());
     std::vector<PairDistance<T>> out;
     out.reserve(found.size());
     for (const auto& f : found) out.push_back(PairDistance<T>{f.a, f.b, Metric::to_distance(f.dist)});
@@ -149,7 +154,7 @@ struct Joins {
     for (const std::size_t j : order) sorted.push_back(internal[j]);
     sorted.push_back(std::numeric_limits<T>::infinity());  // the bin of pairs beyond every radius
 
-    const BoundedPair trees(a, b);
+    const BoundedPair trees(a, b, count_leaf_points);
     const std::vector<T> period = trees.periods(params);
     std::vector<NodeWeights> weights;
     if constexpr (std::is_same_v<Count, double>) {
@@ -176,7 +181,7 @@ struct Joins {
     const T limit = internal_radius(r);
     const bool self = b == nullptr;
     check_pair(a, self ? a : *b);
-    const BoundedPair trees(a, b);
+    const BoundedPair trees(a, b, range_leaf_points);
     const std::vector<T> period = trees.periods(params);
     return with_space(period, [&](const auto& space) {
       return range_join_trees<DistanceSink<T>, FoundPair<T>>(trees.first, trees.second(), limit, self, space,
@@ -208,8 +213,8 @@ struct Joins {
     Bounded first;
     std::optional<Bounded> other;
 
-    BoundedPair(const Tree& a, const Tree* b) : first(a) {
-      if (b) other.emplace(*b);
+    BoundedPair(const Tree& a, const Tree* b, std::size_t leaf_points) : first(a, leaf_points) {
+      if (b) other.emplace(*b, leaf_points);
     }
     const Bounded& second() const { return other ? *other : first; }
 
@@ -225,7 +230,7 @@ struct Joins {
   template <class F>
   static auto with_space(const std::vector<T>& period, F&& f) {
     if (period.empty()) return f(FlatSpace<Metric>{});
-    return f(TorusSpace<Metric, T>{period.data()});
+    return f(TorusSpace<Metric, T>{{period.data()}});
   }
 };
 

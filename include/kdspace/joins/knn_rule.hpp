@@ -119,30 +119,25 @@ class KnnRule {
   bool rescore(std::uint32_t q, std::uint32_t, T key) const { return !(key > node_bound_[q]); }
 
   void base_case(std::uint32_t q, std::uint32_t r, const Context&) {
-    const auto& qn = queries_.node(q);
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
-    const T* rlo = reference_.lo(r);
-    const T* rhi = reference_.hi(r);
     T leaf_bound = 0;
-    for (std::uint32_t i = qn.begin; i < qn.end; ++i) {
-      const T* a = queries_.point(i);
+    bounds_to_box(queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t i, T lower) {
       T kth = table_.kth(i);
       // The leaf's box may lie beyond this point's k-th even when it does not beyond the node's bound.
-      if (!(space_.lower(a, a, rlo, rhi, dim()) > kth)) {
+      if (!(lower > kth)) {
+        const T* a = queries_.point(i);
         if (rn.all_identical) {
           kth = offer_identical(i, a, rn);
         } else {
-          stats_.distances += rn.count() - (same_leaf ? 1 : 0);
-          for (std::uint32_t j = rn.begin; j < rn.end; ++j) {
-            if (same_leaf && j == i) continue;
-            const T d = space_.distance(a, reference_.point(j), dim());
-            if (d <= kth && table_.offer(i, d, reference_.index(j))) kth = table_.kth(i);
-          }
+          stats_.distances += rn.count();
+          distances_to_leaf(reference_, r, rn.begin, a, space_, kth, [&](std::uint32_t j, T d) {
+            if (d <= kth && !(same_leaf && j == i) && table_.offer(i, d, reference_.index(j))) kth = table_.kth(i);
+          });
         }
       }
       leaf_bound = std::max(leaf_bound, kth);
-    }
+    });
     node_bound_[q] = leaf_bound;
   }
 

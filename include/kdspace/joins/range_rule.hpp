@@ -80,21 +80,16 @@ class RangeRule {
   void query_done(std::uint32_t) {}
 
   void base_case(std::uint32_t q, std::uint32_t r, const Context&) {
-    const auto& qn = queries_.node(q);
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
-    const T* rlo = reference_.lo(r);
-    const T* rhi = reference_.hi(r);
-    for (std::uint32_t i = qn.begin; i < qn.end; ++i) {
-      const T* a = queries_.point(i);
-      if (space_.lower(a, a, rlo, rhi, dim()) > limit_) continue;
+    bounds_to_box(queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t i, T lower) {
+      if (lower > limit_) return;
       const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
+      const std::uint32_t a_index = queries_.index(i);
       stats_.distances += rn.end - first;
-      for (std::uint32_t j = first; j < rn.end; ++j) {
-        const T d = space_.distance(a, reference_.point(j), dim());
-        if (d <= limit_) sink_.add(queries_.index(i), reference_.index(j), d);
-      }
-    }
+      distances_to_leaf(reference_, r, first, queries_.point(i), space_, limit_,
+                        [&](std::uint32_t j, T d) { sink_.add(a_index, reference_.index(j), d); });
+    });
   }
 
  private:

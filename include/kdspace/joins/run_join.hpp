@@ -88,19 +88,37 @@ std::vector<Found> range_join_trees(const BoundedTree<T, Dim>& queries, const Bo
   return all;
 }
 
-/// Sorts records with fields a and b (indices below n_a) by (a, b): a counting sort on a, then each
-/// run of equal a sorted on b (runs are as short as a point's neighbour list).
+/// Moves the records of `from` into `to` ordered by key(record) < keys, stably (a counting sort).
+template <class Record, class Key>
+void counting_sort(const std::vector<Record>& from, std::vector<Record>& to, std::size_t keys, Key&& key) {
+  std::vector<std::size_t> next(keys + 1, 0);
+  for (const Record& r : from) ++next[std::size_t{key(r)} + 1];
+  for (std::size_t k = 0; k < keys; ++k) next[k + 1] += next[k];
+  to.resize(from.size());
+  for (const Record& r : from) to[next[key(r)]++] = r;
+}
+
+/// Sorts records with fields a < n_a and b < n_b by (a, b): by b, then stably by a (least
+/// significant first), in time linear in their number and without comparisons.
+template <class Record>
+void sort_by_indices(std::vector<Record>& records, std::size_t n_a, std::size_t n_b) {
+  std::vector<Record> by_b;
+  counting_sort(records, by_b, n_b, [](const Record& r) { return r.b; });
+  counting_sort(by_b, records, n_a, [](const Record& r) { return r.a; });
+}
+
+/// Sorts records with fields a < n_a and b by a, then by less_within_a (each run of equal a is as
+/// short as a point's neighbour list).
 template <class Record, class Less>
 void sort_by_first_index(std::vector<Record>& records, std::size_t n_a, Less&& less_within_a) {
-  std::vector<std::size_t> start(n_a + 1, 0);
-  for (const Record& r : records) ++start[std::size_t{r.a} + 1];
-  for (std::size_t a = 0; a < n_a; ++a) start[a + 1] += start[a];
-  std::vector<Record> sorted(records.size());
-  std::vector<std::size_t> next(start.begin(), start.end() - 1);
-  for (const Record& r : records) sorted[next[r.a]++] = r;
-  for (std::size_t a = 0; a < n_a; ++a)
-    std::sort(sorted.begin() + static_cast<std::ptrdiff_t>(start[a]), sorted.begin() + static_cast<std::ptrdiff_t>(start[a + 1]),
-              less_within_a);
+  std::vector<Record> sorted;
+  counting_sort(records, sorted, n_a, [](const Record& r) { return r.a; });
+  auto run = sorted.begin();
+  while (run != sorted.end()) {
+    const auto end = std::find_if(run, sorted.end(), [&](const Record& r) { return r.a != run->a; });
+    std::sort(run, end, less_within_a);
+    run = end;
+  }
   records.swap(sorted);
 }
 

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <limits>
@@ -25,64 +26,112 @@
 
 namespace kdspace::detail {
 
-/// Ordinary space: internal_distance.
-template <class Metric>
-struct FlatSpace {
-  template <class T>
-  T distance(const T* a, const T* b, std::size_t dim) const {
-    return internal_distance<Metric>(a, b, dim);
-  }
+// std::max and std::min by value (the same results, NaN included), which compilers turn into vector
+// max and min instructions more readily than the standard ones, which return references.
+template <class T>
+T larger(T a, T b) {
+  return a < b ? b : a;
+}
+template <class T>
+T smaller(T a, T b) {
+  return b < a ? b : a;
+}
 
-  /// No larger than the distance of any point of box A = [alo, ahi] to any point of box B.
-  /// Axis term: the gap between the two intervals (0 where they overlap). For a in A and b in B,
-  /// b - a >= blo - ahi, so fl(b - a) >= fl(blo - ahi), and likewise the other way.
+/// Ordinary space, axis by axis: the coordinate difference, and the gap and span of two intervals.
+/// For a in [alo, ahi] and b in [blo, bhi]: b - a >= blo - ahi, so fl(b - a) >= fl(blo - ahi), and
+/// likewise the other way; so |fl(a - b)| lies between the gap (0 where the intervals overlap) and
+/// the widest span.
+struct FlatAxes {
   template <class T>
-  T lower(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
-    return combine_axes<Metric, T>(dim, [&](std::size_t i) {
-      return Metric::term(std::max(std::max(blo[i] - ahi[i], alo[i] - bhi[i]), T(0)));
-    });
+  T difference(T a, T b, std::size_t) const {
+    return a - b;
   }
-
-  /// No smaller than the distance of any point of A to any point of B. Axis term: the widest span.
   template <class T>
-  T upper(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
-    return combine_axes<Metric, T>(dim, [&](std::size_t i) { return Metric::term(std::max(bhi[i] - alo[i], ahi[i] - blo[i])); });
+  T lower(T alo, T ahi, T blo, T bhi, std::size_t) const {
+    return larger(larger(blo - ahi, alo - bhi), T(0));
+  }
+  template <class T>
+  T upper(T alo, T ahi, T blo, T bhi, std::size_t) const {
+    return larger(bhi - alo, ahi - blo);
+  }
+  /// lower(x, x, blo, bhi) up to its sign: x less the nearest coordinate of the interval. (The same
+  /// magnitude: fl(x - blo) = -fl(blo - x).) Written with a clamp, which becomes vector min and max.
+  template <class T>
+  T lower_from_point(T x, T blo, T bhi, std::size_t) const {
+    return x - smaller(larger(x, blo), bhi);
   }
 };
 
 /// A torus: on axis i with period L (points in [0, L)) the coordinate difference d counts as
 /// min(|d|, L - |d|), as in SciPy's cKDTree with `boxsize`. Axes that are not periodic have L = +inf,
-/// where the same formula gives |d| (and, with |d| = inf, std::min keeps |d| against inf - inf = NaN),
-/// so a torus without periodic axes gives FlatSpace's values bit for bit.
-template <class Metric, class T>
-struct TorusSpace {
+/// where the same formula gives |d| (and, with |d| = inf, smaller() keeps |d| against inf - inf = NaN),
+/// so a torus without periodic axes gives the flat values bit for bit (Metric::term(|d|) is
+/// Metric::term(d)). With gap g and span u of the plain intervals, g <= |d| <= u, so
+/// fl(L - |d|) >= fl(L - u), and the wrapped difference is at least min(g, L - u) and at most
+/// min(u, L - g).
+template <class T>
+struct TorusAxes {
   const T* period;  ///< dim values: L, or +inf
 
-  T distance(const T* a, const T* b, std::size_t dim) const {
-    return combine_axes<Metric, T>(dim, [&](std::size_t i) {
-      const T d = std::abs(a[i] - b[i]);
-      return Metric::term(std::min(d, period[i] - d));
-    });
+  T difference(T a, T b, std::size_t i) const {
+    const T d = std::abs(a - b);
+    return smaller(d, period[i] - d);
   }
-
-  /// With gap g and span u of the plain intervals: g <= |d| <= u, so fl(L - |d|) >= fl(L - u) and the
-  /// wrapped difference min(|d|, L - |d|) is at least min(g, L - u) and at most min(u, L - g).
-  T lower(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
-    return combine_axes<Metric, T>(dim, [&](std::size_t i) {
-      const T gap = std::max(std::max(blo[i] - ahi[i], alo[i] - bhi[i]), T(0));
-      const T span = std::max(bhi[i] - alo[i], ahi[i] - blo[i]);
-      return Metric::term(std::min(gap, period[i] - span));
-    });
+  T lower(T alo, T ahi, T blo, T bhi, std::size_t i) const {
+    return smaller(FlatAxes{}.lower(alo, ahi, blo, bhi, i), period[i] - FlatAxes{}.upper(alo, ahi, blo, bhi, i));
   }
-
-  T upper(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
-    return combine_axes<Metric, T>(dim, [&](std::size_t i) {
-      const T gap = std::max(std::max(blo[i] - ahi[i], alo[i] - bhi[i]), T(0));
-      const T span = std::max(bhi[i] - alo[i], ahi[i] - blo[i]);
-      return Metric::term(std::min(span, period[i] - gap));
-    });
+  T upper(T alo, T ahi, T blo, T bhi, std::size_t i) const {
+    return smaller(FlatAxes{}.upper(alo, ahi, blo, bhi, i), period[i] - FlatAxes{}.lower(alo, ahi, blo, bhi, i));
+  }
+  T lower_from_point(T x, T blo, T bhi, std::size_t i) const {
+    const T gap = std::abs(FlatAxes{}.lower_from_point(x, blo, bhi, i));
+    return smaller(gap, period[i] - FlatAxes{}.upper(x, x, blo, bhi, i));
   }
 };
+
+/// Distances and bounds of a metric over the axes of a space (FlatAxes or TorusAxes), each combined
+/// by combine_axes in the order of internal_distance.
+template <class Metric, class Axes>
+struct Space : Axes {
+  /// The internal distance of two points (for FlatAxes: internal_distance itself).
+  template <class T>
+  T distance(const T* a, const T* b, std::size_t dim) const {
+    return combine_axes<Metric, T>(dim, [&](std::size_t i) { return Metric::term(this->difference(a[i], b[i], i)); });
+  }
+
+  /// distance(a, p_j) for Count points stored by column: axis i of point j at columns[i * stride + j].
+  template <std::size_t Count, class T>
+  std::array<T, Count> distances(const T* a, const T* columns, std::size_t stride, std::size_t dim) const {
+    return combine_axes_many<Metric, Count, T>(dim, [&](std::size_t i, std::size_t j) {
+      return Metric::term(this->difference(a[i], columns[i * stride + j], i));
+    });
+  }
+
+  /// No larger than the distance of any point of box A = [alo, ahi] to any point of box B.
+  template <class T>
+  T lower(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
+    return combine_axes<Metric, T>(dim, [&](std::size_t i) { return Metric::term(Axes::lower(alo[i], ahi[i], blo[i], bhi[i], i)); });
+  }
+
+  /// lower() for Count points (boxes of one point) stored by column, to box B.
+  template <std::size_t Count, class T>
+  std::array<T, Count> lower_many(const T* columns, std::size_t stride, const T* blo, const T* bhi, std::size_t dim) const {
+    return combine_axes_many<Metric, Count, T>(dim, [&](std::size_t i, std::size_t j) {
+      return Metric::term(Axes::lower_from_point(columns[i * stride + j], blo[i], bhi[i], i));
+    });
+  }
+
+  /// No smaller than the distance of any point of A to any point of B.
+  template <class T>
+  T upper(const T* alo, const T* ahi, const T* blo, const T* bhi, std::size_t dim) const {
+    return combine_axes<Metric, T>(dim, [&](std::size_t i) { return Metric::term(Axes::upper(alo[i], ahi[i], blo[i], bhi[i], i)); });
+  }
+};
+
+template <class Metric>
+using FlatSpace = Space<Metric, FlatAxes>;
+template <class Metric, class T>
+using TorusSpace = Space<Metric, TorusAxes<T>>;
 
 /// The period of each axis from a box size given by the user: one value for every axis, or one per
 /// axis; 0 means "not periodic" (as in SciPy). Empty when no axis is periodic. Throws Error for a

@@ -18,6 +18,8 @@
 // `middle` split) are never scored.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <utility>
@@ -96,6 +98,68 @@ class DualTraversal {
   Rule& rule_;
   JoinStats& stats_;
 };
+
+/// The bits of the values of a block that are <= limit (bit j for value j): compilers make it one
+/// vector comparison and a mask move, so that a block with nothing near costs no branch per value.
+template <class T, std::size_t N>
+unsigned at_most(const std::array<T, N>& values, T limit) {
+  static_assert(N <= 32, "a block fits in the bits of an unsigned");
+  unsigned bits = 0;
+  for (std::size_t j = 0; j < N; ++j) bits |= static_cast<unsigned>(values[j] <= limit) << j;
+  return bits;
+}
+
+/// The lowest set bit's position, and that bit cleared.
+inline unsigned take_lowest_bit(unsigned& bits) {
+#if defined(__GNUC__)
+  const unsigned j = static_cast<unsigned>(__builtin_ctz(bits));
+#else
+  unsigned j = 0;
+  while (!(bits >> j & 1u)) ++j;
+#endif
+  bits &= bits - 1;
+  return j;
+}
+
+/// The distances from point `a` to the points [first, leaf.end) of reference leaf `id`, computed a
+/// block at a time from the leaf's columns (vector instructions); visit(position, distance) for
+/// those at most `limit` (re-read before each block: a k-NN join lowers it as it goes), in order.
+template <class Tree, class Space, class T, class Visit>
+void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
+                       const T& limit, Visit&& visit) {
+  constexpr std::size_t block = Tree::column_block;
+  const auto& leaf = reference.node(id);
+  const std::size_t stride = Tree::column_stride(leaf);
+  const T* columns = reference.columns(id);
+  std::size_t start = (first - leaf.begin) / block * block;
+  // Positions before `first` in the first block, and past the end in the last, are masked off.
+  unsigned keep = ~0u << (first - leaf.begin - start);
+  for (; start < leaf.count(); start += block, keep = ~0u) {
+    const std::array<T, block> dist = space.template distances<block>(a, columns + start, stride, reference.dim());
+    if (leaf.count() - start < block) keep &= (1u << (leaf.count() - start)) - 1;
+    unsigned near = at_most(dist, limit) & keep;
+    const std::uint32_t base = leaf.begin + static_cast<std::uint32_t>(start);
+    while (near) {
+      const unsigned j = take_lowest_bit(near);
+      visit(base + j, dist[j]);
+    }
+  }
+}
+
+/// For each point of query leaf `id`, in order, visit(position, bound): the lower bound of its
+/// distance to box [lo, hi], worked out a block of points at a time from the leaf's columns.
+template <class Tree, class Space, class T, class Visit>
+void bounds_to_box(const Tree& queries, std::uint32_t id, const T* lo, const T* hi, const Space& space, Visit&& visit) {
+  constexpr std::size_t block = Tree::column_block;
+  const auto& leaf = queries.node(id);
+  const std::size_t stride = Tree::column_stride(leaf);
+  const T* columns = queries.columns(id);
+  for (std::size_t start = 0; start < leaf.count(); start += block) {
+    const std::array<T, block> bound = space.template lower_many<block>(columns + start, stride, lo, hi, queries.dim());
+    const std::size_t count = std::min<std::size_t>(block, leaf.count() - start);
+    for (std::size_t j = 0; j < count; ++j) visit(leaf.begin + static_cast<std::uint32_t>(start + j), bound[j]);
+  }
+}
 
 /// The query subtrees a join's work is split into, in depth-first order: the largest subtrees of at
 /// most `max_points` points. They depend on the tree only, never on the number of threads, so the
