@@ -114,6 +114,7 @@ write_npy("base64.npy", base, "<f8")
 write_fvecs("query.fvecs", query)
 write_bvecs("base.bvecs", base)
 write_csv("query4.csv", [[1, 2, 3, 4], [5, 6, 7, 8]])
+write_csv("query_neg.csv", [[1, 2, 3], [3, 3, -1]])  # row 2 lies outside a periodic box [0, L)
 
 # Radius: two tight groups far apart and a few points between, so rows differ in length.
 cl = [[0, 0], [1, 0], [0, 1], [1, 1], [2, 2], [10, 10], [11, 10], [20, 0], [30, 30], [31, 31]]
@@ -299,13 +300,134 @@ if expect_ok "radius --stats" radius --base cluster.csv --query cluster_query.cs
   check_stats "radius --stats is JSON with the required keys" "$common_keys radius"
 fi
 
+# ---- pairs, count, knn --self, --boxsize (dual-tree joins) ---------------------------------------
+expect_error "pairs: missing -r" 2 "-r" -- pairs --base base.csv --out p.pairs
+expect_error "pairs: negative radius" 2 "-r" -- pairs --base base.csv -r -1 --out p.pairs
+expect_error "pairs: --out not .pairs" 2 "--out" ".pairs" -- pairs --base base.csv -r 1 --out p.ivecs
+expect_error "count: a radius that is not a number" 2 "-r" "x" -- count --base base.csv -r 1,x
+expect_error "count: negative boxsize" 2 "--boxsize" -- count --base base.csv -r 1 --boxsize 10,-2,10
+expect_error "knn --self with --query" 2 "exclude each other" -- knn --base base.csv --query query.csv --self -k 3 --out ids.ivecs
+expect_error "knn --self with --forest" 2 "--self" -- knn --base base.csv --self -k 3 --out ids.ivecs --forest 2
+expect_error "knn --boxsize with --eps" 2 "--eps" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --boxsize 10 --eps 1
+expect_error "pairs: points outside the box" 1 "base.csv: row" "lies outside the periodic box [0, 5" -- \
+  pairs --base base.csv -r 1 --out p.pairs --boxsize 5
+expect_error "pairs: boxsize of the wrong length" 1 "boxsize has 2 values" -- pairs --base base.csv -r 1 --out p.pairs --boxsize 10,10
+expect_error "pairs: dimension mismatch" 1 "query4.csv" "dimension 4" -- pairs --base base.csv --with query4.csv -r 1 --out p.pairs
+expect_error "pairs: NaN" 1 "nan.csv: row 3" -- pairs --base nan.csv -r 1 --out p.pairs
+expect_error "knn --self: k > n - 1" 1 "k = 40 exceeds the number of other points" -- knn --base base.csv --self -k 40 --out ids.ivecs
+expect_error "knn --boxsize: queries outside the box" 1 "query_neg.csv: row 2: coordinate 3" "outside the periodic box" -- \
+  knn --base base.csv --query query_neg.csv -k 3 --out ids.ivecs --boxsize 10
+expect_error "pairs: unwritable output" 1 "no-such-dir/p.pairs" -- pairs --base base.csv -r 1 --out no-such-dir/p.pairs
+
+# check_joins NAME WHAT ARGS...: the output of a join command equals a Python brute force. WHAT is
+# pairs (p.pairs, and d.npy when written), count (stdout), self (ids.ivecs) or torus (ids.ivecs);
+# ARGS: metric, radius or radii or k, base, [other], [box size].
+check_joins() {
+  local name=$1
+  shift
+  if python3 - "$@" <<'EOF2' >check.txt 2>&1; then pass "$name"; else fail "$name" "$(cat check.txt)"; fi
+import json, math, os, struct, sys
+what, metric, param, base_path = sys.argv[1:5]
+other_path = sys.argv[5] if len(sys.argv) > 5 and sys.argv[5] != "-" else None
+box = float(sys.argv[6]) if len(sys.argv) > 6 else None
+
+def read_csv(path):
+    return [[float(v) for v in line.split(",")] for line in open(path) if line.strip() and not line[0].isalpha()]
+
+def dist(a, b):
+    diffs = [abs(x - y) for x, y in zip(a, b)]
+    if box is not None:
+        diffs = [min(d, box - d) for d in diffs]
+    return {"l2": math.sqrt(sum(t * t for t in diffs)), "l1": sum(diffs), "linf": max(diffs)}[metric]
+
+base = read_csv(base_path)
+other = read_csv(other_path) if other_path else None
+if what in ("pairs", "count"):
+    def pairs_within(r):
+        if other is None:
+            return [(i, j) for i in range(len(base)) for j in range(i + 1, len(base)) if dist(base[i], base[j]) <= r]
+        return [(i, j) for i in range(len(base)) for j in range(len(other)) if dist(base[i], other[j]) <= r]
+if what == "pairs":
+    data = open("p.pairs", "rb").read()
+    (m,) = struct.unpack_from("<Q", data)
+    assert len(data) == 8 + 8 * m, "file size %d for %d pairs" % (len(data), m)
+    got = [struct.unpack_from("<II", data, 8 + 8 * i) for i in range(m)]
+    want = pairs_within(float(param))
+    assert got == want, "got %d pairs %s..., expected %d %s..." % (len(got), got[:5], len(want), want[:5])
+    if os.path.exists("d.npy"):
+        raw = open("d.npy", "rb").read()
+        header_len = struct.unpack_from("<H", raw, 8)[0]
+        values = struct.unpack_from("<%dd" % m, raw, 10 + header_len)
+        for (i, j), v in zip(got, values):
+            d = dist(base[i], (other or base)[j])
+            assert abs(d - v) <= 1e-12 * max(1, d), (i, j, d, v)
+elif what == "count":
+    out = json.loads(open("out.txt").read())
+    radii = [float(r) for r in param.split(",")]
+    assert out["radii"] == radii, out
+    want = [len(pairs_within(r)) for r in radii]
+    assert out["counts"] == want, "counts %s, expected %s" % (out["counts"], want)
+else:  # self, torus: ids.ivecs
+    data, rows, at = open("ids.ivecs", "rb").read(), [], 0
+    while at < len(data):
+        (d,) = struct.unpack_from("<i", data, at)
+        rows.append(list(struct.unpack_from("<%di" % d, data, at + 4)))
+        at += 4 + 4 * d
+    k = int(param)
+    queries = base if what == "self" else other
+    assert len(rows) == len(queries), (len(rows), len(queries))
+    for q, (query, got) in enumerate(zip(queries, rows)):
+        order = sorted((dist(query, p), i) for i, p in enumerate(base) if not (what == "self" and i == q))
+        assert got == [i for _, i in order[:k]], "row %d: %s, expected %s" % (q + 1, got, order[:k])
+print("ok")
+EOF2
+}
+rm -f d.npy
+if expect_ok "pairs in one set" pairs --base base.csv -r 3 --out p.pairs; then check_joins "pairs in one set equal brute force" pairs l2 3 base.csv; fi
+if expect_ok "pairs --distances" pairs --base base.csv -r 2.5 --out p.pairs --distances d.npy --metric l1; then
+  check_joins "pairs --distances (l1) equal brute force" pairs l1 2.5 base.csv
+fi
+rm -f d.npy
+if expect_ok "pairs across two sets" pairs --base base.csv --with query.fvecs -r 4 --out p.pairs --threads 2; then
+  check_joins "pairs across two sets equal brute force" pairs l2 4 base.csv query.csv
+fi
+if expect_ok "pairs --boxsize" pairs --base base.csv -r 2 --out p.pairs --boxsize 10; then
+  check_joins "pairs on a torus equal brute force" pairs l2 2 base.csv - 10
+fi
+if expect_ok "count" count --base base.csv -r 3,0,1,2.5,1.4142135623730951; then
+  check_joins "count equals brute force" count l2 3,0,1,2.5,1.4142135623730951 base.csv
+fi
+if expect_ok "count --with --metric linf" count --base base.csv --with query.csv -r 1,2,3 --metric linf; then
+  check_joins "count across two sets (linf) equals brute force" count linf 1,2,3 base.csv query.csv
+fi
+if expect_ok "count --boxsize" count --base base.csv -r 1,2,3,5 --boxsize 10; then
+  check_joins "count on a torus equals brute force" count l2 1,2,3,5 base.csv - 10
+fi
+if expect_ok "knn --self" knn --base base.csv --self -k 5 --out ids.ivecs; then
+  check_joins "knn --self equals brute force (each point's nearest others)" self l2 5 base.csv
+fi
+if expect_ok "knn --boxsize" knn --base base.csv --query query.csv -k 4 --out ids.ivecs --boxsize 10; then
+  check_joins "knn on a torus equals brute force" torus l2 4 base.csv query.csv 10
+fi
+if expect_ok "pairs --stats" pairs --base base.csv -r 2 --out p.pairs --stats; then
+  check_stats "pairs --stats is JSON with the required keys" "build_s query_s queries_per_s threads depth leaves nodes_visited_per_query points_visited_per_query pairs"
+fi
+if expect_ok "knn --self --stats" knn --base base.csv --self -k 2 --out ids.ivecs --stats; then
+  check_stats "knn --self --stats is JSON with the required keys" "$common_keys k method"
+fi
+# A failed run leaves an earlier output as it was, and no temporary file behind.
+cp p.pairs p-before.pairs
+expect_error "pairs: a failure keeps the earlier output" 1 "nan.csv" -- pairs --base base.csv --with nan.csv -r 1 --out p.pairs
+if cmp -s p.pairs p-before.pairs && ! ls ./*.tmp.* >/dev/null 2>&1; then pass "the earlier .pairs is intact, no temporary left"
+else fail "the earlier .pairs is intact, no temporary left" "$(ls)"; fi
+
 # ---- help, version -------------------------------------------------------------------------------
 if expect_ok "--version" --version && grep -qE '^kdspace [0-9]+\.[0-9]+\.[0-9]+$' out.txt; then pass "--version prints kdspace X.Y.Z"
 else fail "--version prints kdspace X.Y.Z" "stdout: $(cat out.txt)"; fi
 if expect_ok "--help" --help && grep -qF "kdspace knn" out.txt && grep -qF "kdspace radius" out.txt && grep -qF -- "-k 0" out.txt; then
   pass "--help prints the usage (with the rule for -k 0)"
 else fail "--help prints the usage (with the rule for -k 0)" "stdout: $(head -c 300 out.txt)"; fi
-for cmd in knn radius demo; do
+for cmd in knn radius demo pairs count; do
   if expect_ok "$cmd --help" $cmd --help && grep -qF "usage: kdspace $cmd" out.txt; then pass "$cmd --help"
   else fail "$cmd --help" "stdout: $(head -c 300 out.txt)"; fi
 done

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "kdspace/joins/joins.hpp"
+#include "kdspace/joins/periodic_tree.hpp"
 #include "support.hpp"
 
 namespace {
@@ -264,6 +265,138 @@ TEST_CASE("joins: L1 and Linf joins equal brute force flat and periodic", "[join
     for (bool periodic : {false, true}) {
       check_case<float, kdspace::L1>(c, periodic, seed++);
       check_case<double, kdspace::Linf>(c, periodic, seed++);
+    }
+  }
+}
+
+TEST_CASE("joins: PeriodicTree answers single and batch queries like brute force on the torus", "[joins][exact][periodic]") {
+  using kdspace::L2;
+  for (const Case& c : {cases[1], cases[3], cases[4], cases[6], cases[8], cases[11]}) {
+    for (bool doubles : {false, true}) {
+      CAPTURE(kdspace_test::name(c.shape), c.n, c.dim, doubles);
+      auto run = [&](auto zero) {
+        using T = decltype(zero);
+        const Torus<T> space(boxsize_for<T>(c.shape, c.dim, true), c.dim);
+        std::vector<T> points = make_points<T>(c.shape, c.n, c.dim, 31);
+        std::vector<T> queries = make_points<T>(Shape::uniform, 40, c.dim, 32);
+        space.wrap(points);
+        space.wrap(queries);
+        const PointTree<T> tree(points.data(), c.n, c.dim);
+        const kdspace::PeriodicTree<T> torus(tree, space.boxsize);
+        const auto table = DistanceTable<T>::template make<L2>(space, queries, points);
+        const std::size_t k = std::min<std::size_t>(5, c.n);
+        const auto want = brute_knn<L2>(table, k, false);
+        const T r = L2::to_distance(table.at(0, c.n / 2));  // exactly some pair's distance
+        const auto batch = torus.knn_batch(queries.data(), 40, k, 1);
+        const auto radius_batch = torus.radius_batch(queries.data(), 40, r, 1);
+        REQUIRE(first_row_difference(batch, want) == "");
+        for (std::size_t q = 0; q < 40; ++q) {
+          REQUIRE(torus.knn(&queries[q * c.dim], k) == want[q]);
+          // (distance, index) order, decided on the internal distance as everywhere.
+          std::vector<Candidate<T>> near;
+          for (std::size_t j = 0; j < c.n; ++j)
+            if (table.at(q, j) <= L2::to_internal(r)) near.push_back({table.at(q, j), static_cast<std::uint32_t>(j)});
+          std::sort(near.begin(), near.end());
+          std::vector<Neighbor<T>> within;
+          for (const auto& nb : near) within.push_back({nb.index, L2::to_distance(nb.dist)});
+          REQUIRE(torus.radius(&queries[q * c.dim], r) == within);
+          REQUIRE(std::vector<Neighbor<T>>(radius_batch.row(q).begin(), radius_batch.row(q).end()) == within);
+        }
+      };
+      if (doubles) run(0.0);
+      else run(0.0f);
+    }
+  }
+}
+
+TEST_CASE("joins: a PeriodicTree box wraps around periodic axes", "[joins][periodic]") {
+  // 2-D grid of integer points in [0, 10) x [0, 10), periodic along x only.
+  std::vector<float> points;
+  for (int x = 0; x < 10; ++x)
+    for (int y = 0; y < 10; ++y) points.insert(points.end(), {float(x), float(y)});
+  const PointTree<float> tree(points.data(), 100, 2);
+  const kdspace::PeriodicTree<float> torus(tree, {10.0, 0.0});
+  auto brute = [&](const float* lo, const float* hi) {
+    std::vector<kdspace::Index> out;
+    for (kdspace::Index i = 0; i < 100; ++i) {
+      const float x = points[i * 2], y = points[i * 2 + 1];
+      const bool in_x = lo[0] <= hi[0] ? (lo[0] <= x && x <= hi[0]) : (x >= lo[0] || x <= hi[0]);
+      if (in_x && lo[1] <= y && y <= hi[1]) out.push_back(i);
+    }
+    return out;
+  };
+  const float boxes[][4] = {{8, 1, 2, 3}, {2, 1, 8, 3}, {9.5f, 0, 0.5f, 9}, {0, 0, 10, 9}, {3, 4, 3, 4}, {7, 5, 7, 4.5f}};
+  for (const auto& b : boxes) {
+    const float lo[2] = {b[0], b[1]}, hi[2] = {b[2], b[3]};
+    CAPTURE(lo[0], lo[1], hi[0], hi[1]);
+    if (lo[1] > hi[1]) {
+      REQUIRE_THROWS_WITH(torus.box(lo, hi), Catch::Contains("not periodic"));
+      continue;
+    }
+    REQUIRE(torus.box(lo, hi) == brute(lo, hi));
+  }
+  const std::vector<kdspace::Index> wrapped = [&] {
+    const float lo[2] = {8, 1}, hi[2] = {2, 3};
+    return torus.box(lo, hi);
+  }();
+  REQUIRE(wrapped.size() == 5 * 3);  // x in {8, 9, 0, 1, 2}, y in {1, 2, 3}
+}
+
+TEST_CASE("joins: bad input is a clear error", "[joins][errors]") {
+  std::vector<float> points{0.5f, 0.5f, 1.5f, 0.25f, 0.1f, 0.9f};
+  const PointTree<float> tree(points.data(), 3, 2);
+  const std::vector<float> three_d{0.f, 0.f, 0.f};
+  const PointTree<float> other(three_d.data(), 1, 3);
+  JoinParams params;
+  REQUIRE_THROWS_WITH(kdspace::self_knn_join(tree, 3), Catch::Contains("exceeds the number of other points (2)"));
+  REQUIRE_THROWS_WITH(kdspace::self_knn_join(tree, 0), Catch::Contains("k must be at least 1"));
+  REQUIRE_THROWS_WITH(kdspace::pairs_within(tree, other, 1.f), Catch::Contains("differ in dimension"));
+  REQUIRE_THROWS_WITH(kdspace::pairs_within(tree, -1.f), Catch::Contains("radius must be a non-negative number"));
+  REQUIRE_THROWS_WITH(kdspace::count_pairs(tree, {0.5f, std::nanf("")}), Catch::Contains("radius must be"));
+  REQUIRE_THROWS_WITH(kdspace::count_pairs(tree, std::vector<float>{}), Catch::Contains("no radii"));
+  params.boxsize = {1.0};
+  REQUIRE_THROWS_WITH(kdspace::pairs_within(tree, 0.1f, params),
+                      Catch::Contains("row 2: coordinate 1 = 1.500000 lies outside the periodic box [0, 1.000000)"));
+  params.boxsize = {2.0, 2.0, 2.0};
+  REQUIRE_THROWS_WITH(kdspace::pairs_within(tree, 0.1f, params), Catch::Contains("boxsize has 3 values"));
+  params.boxsize = {2.0, -1.0};
+  REQUIRE_THROWS_WITH(kdspace::pairs_within(tree, 0.1f, params), Catch::Contains("boxsize of axis 2 must be"));
+  REQUIRE_THROWS_WITH(kdspace::PeriodicTree<float>(tree, {0.0}), Catch::Contains("no axis is periodic"));
+  const kdspace::PeriodicTree<float> torus(tree, {2.0});
+  const float outside[2] = {0.5f, 2.0f};
+  REQUIRE_THROWS_WITH(torus.knn(outside, 1), Catch::Contains("query: coordinate 2 = 2.000000 lies outside"));
+  REQUIRE_THROWS_WITH(torus.knn_batch(outside, 1, 1), Catch::Contains("query row 1: coordinate 2"));
+  const std::vector<double> bad_weights{1, NAN, 1};
+  REQUIRE_THROWS_WITH(kdspace::count_weighted_pairs(tree, {0.5f}, bad_weights.data()),
+                      Catch::Contains("weights: row 2: weight is not finite"));
+}
+
+TEST_CASE("joins: answers are the same on any number of threads", "[joins][threads]") {
+  const std::size_t n = 20000, dim = 3;
+  std::vector<float> points = make_points<float>(Shape::clustered, n, dim, 5);
+  const Torus<float> space({25.0}, dim);
+  space.wrap(points);
+  const PointTree<float> tree(points.data(), n, dim);
+  for (bool periodic : {false, true}) {
+    CAPTURE(periodic);
+    JoinParams params;
+    params.threads = 1;
+    if (periodic) params.boxsize = space.boxsize;
+    const std::vector<float> radii{0.001f, 0.01f, 0.05f, 0.3f};
+    std::vector<double> weights(n);
+    for (std::size_t i = 0; i < n; ++i) weights[i] = 1.0 / static_cast<double>(i + 1);  // sums that round
+    const auto knn = kdspace::self_knn_join(tree, 6, params);
+    const auto pairs = kdspace::pairs_within(tree, 0.02f, params);
+    const auto counts = kdspace::count_pairs(tree, radii, params);
+    const auto sums = kdspace::count_weighted_pairs(tree, radii, weights.data(), params);
+    for (unsigned threads : {2u, 3u, 0u}) {
+      CAPTURE(threads);
+      params.threads = threads;
+      const auto knn_many = kdspace::self_knn_join(tree, 6, params);
+      REQUIRE(knn_many.neighbors == knn.neighbors);
+      REQUIRE(kdspace::pairs_within(tree, 0.02f, params) == pairs);
+      REQUIRE(kdspace::count_pairs(tree, radii, params) == counts);
+      REQUIRE(kdspace::count_weighted_pairs(tree, radii, weights.data(), params) == sums);  // bit for bit
     }
   }
 }

@@ -10,3 +10,5 @@ int run_radius_command(const std::vector<std::string>& args);  // knn_command.cp
 int run_demo_command(const std::vector<std::string>& args);    // demo_command.cpp
 int run_rays_command(const std::vector<std::string>& args);    // rays_command.cpp
 int run_render_command(const std::vector<std::string>& args);  // rays_command.cpp
+int run_pairs_command(const std::vector<std::string>& args);   // joins_command.cpp
+int run_count_command(const std::vector<std::string>& args);   // joins_command.cpp

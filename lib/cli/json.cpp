@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 
 namespace kdspace::cli {
 
@@ -49,6 +50,29 @@ JsonObject& JsonObject::add(const std::string& k, std::uint64_t value) {
 JsonObject& JsonObject::add(const std::string& k, const std::string& value) {
   key(k);
   body_ += json_string(value);
+  return *this;
+}
+
+JsonObject& JsonObject::add(const std::string& k, const std::vector<double>& values) {
+  key(k);
+  body_ += "[";
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    char buf[32] = "null";
+    for (int digits = 15; std::isfinite(values[i]) && digits <= 17; ++digits) {
+      std::snprintf(buf, sizeof buf, "%.*g", digits, values[i]);
+      if (std::strtod(buf, nullptr) == values[i]) break;
+    }
+    body_ += (i ? ", " : "") + std::string(buf);
+  }
+  body_ += "]";
+  return *this;
+}
+
+JsonObject& JsonObject::add(const std::string& k, const std::vector<std::uint64_t>& values) {
+  key(k);
+  body_ += "[";
+  for (std::size_t i = 0; i < values.size(); ++i) body_ += (i ? ", " : "") + std::to_string(values[i]);
+  body_ += "]";
   return *this;
 }
 

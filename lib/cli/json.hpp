@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace kdspace::cli {
 
@@ -13,6 +14,9 @@ class JsonObject {
   JsonObject& add(const std::string& key, unsigned value) { return add(key, std::uint64_t{value}); }
   JsonObject& add(const std::string& key, const std::string& value);
   JsonObject& add(const std::string& key, const char* value) { return add(key, std::string(value)); }
+  /// An array of numbers, each in the shortest form that reads back exactly.
+  JsonObject& add(const std::string& key, const std::vector<double>& values);
+  JsonObject& add(const std::string& key, const std::vector<std::uint64_t>& values);
   /// The object on one line: {"a": 1, "b": "x"}.
   std::string str() const { return "{" + body_ + "}"; }
 

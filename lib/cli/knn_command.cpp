@@ -8,6 +8,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "commands.hpp"
@@ -19,6 +20,7 @@
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/point_forest.hpp"
 #include "kdspace/points/point_tree.hpp"
+#include "join_search.hpp"
 #include "options.hpp"
 #include "progress.hpp"
 #include "search_job.hpp"
@@ -63,15 +65,39 @@ struct Inputs {
   io::Matrix<T> queries;
 };
 
+// With --boxsize: the box size, and the points of `file` inside the box (the message names the row).
+template <class T>
+void check_in_box(const io::Matrix<T>& points, const std::string& file, const SearchJob& job) {
+  if (job.boxsize.empty()) return;
+  if constexpr (std::is_floating_point_v<T>) {
+    try {
+      const std::vector<T> period = detail::periods_from_boxsize<T>(job.boxsize, points.cols);
+      detail::check_in_box(points.data.data(), points.rows, points.cols, period);
+    } catch (const Error& e) {
+      throw Error(file + ": " + e.what());
+    }
+  }
+}
+
 template <class T, class B = T>
 Inputs<T, B> read_inputs(const SearchJob& job) {
-  Inputs<T, B> in{read_with_progress<B>(job.base), read_with_progress<T>(job.query)};
+  Inputs<T, B> in{read_with_progress<B>(job.base), {}};
+  if (job.self) {
+    if (job.k > in.base.rows - 1)
+      throw Error("k = " + std::to_string(job.k) + " exceeds the number of other points (" + job.base + " has " +
+                  std::to_string(in.base.rows) + " points)");
+    check_in_box(in.base, job.base, job);
+    return in;
+  }
+  in.queries = read_with_progress<T>(job.query);
   if (in.queries.cols != in.base.cols)
     throw Error(job.query + ": dimension " + std::to_string(in.queries.cols) + " does not match the base (" +
                 job.base + ": dimension " + std::to_string(in.base.cols) + ")");
   if (job.mode == Mode::knn && job.k > in.base.rows)
     throw Error("k = " + std::to_string(job.k) + " exceeds the number of base points (" + job.base + " has " +
                 std::to_string(in.base.rows) + ")");
+  check_in_box(in.base, job.base, job);
+  check_in_box(in.queries, job.query, job);
   return in;
 }
 
@@ -84,9 +110,26 @@ PointTree<T, Dynamic, Metric> build_tree(const io::Matrix<T>& base, const Search
   }
 }
 
+// Whether the batch goes through a dual-tree join (join_search.hpp).
+bool by_join(const SearchJob& job, std::size_t queries, std::size_t dim) {
+  const bool exact_knn = job.mode == Mode::knn && job.eps == 0;
+  return job.self || !job.boxsize.empty() || (exact_knn && join_is_faster(queries, dim));
+}
+
 template <class T, class Metric>
 NeighborLists<T> search(const PointTree<T, Dynamic, Metric>& tree, const io::Matrix<T>& queries,
                         const SearchJob& job, QueryStats& stats) {
+  if (by_join(job, queries.rows, tree.dim())) {
+    JoinRequest request;
+    request.knn = job.mode == Mode::knn;
+    request.k = job.k;
+    request.radius = job.radius;
+    request.max_results = job.max_results == std::numeric_limits<std::size_t>::max() ? 0 : job.max_results;
+    request.self = job.self;
+    request.boxsize = job.boxsize;
+    request.threads = job.threads;
+    return search_by_join(tree, queries, request, stats);
+  }
   try {
     if (job.mode == Mode::knn) {
       SearchParams params;
@@ -124,12 +167,15 @@ int run_search(const SearchJob& job) {
   write_results(found, job);
 
   if (job.stats) {
-    const double nq = static_cast<double>(queries.rows);
+    const double nq = static_cast<double>(found.rows());
     JsonObject json;
     json.add("command", job.mode == Mode::knn ? "knn" : "radius")
         .add("points", std::uint64_t{points})
         .add("dim", std::uint64_t{tree.dim()})
-        .add("queries", std::uint64_t{queries.rows});
+        .add("queries", std::uint64_t{found.rows()});
+    json.add("method", by_join(job, queries.rows, tree.dim()) ? "dual-tree join" : "tree");
+    if (job.self) json.add("self", "yes");
+    if (!job.boxsize.empty()) json.add("boxsize", job.boxsize);
     if (job.mode == Mode::knn) {
       json.add("k", std::uint64_t{job.k}).add("eps", job.eps);
     } else {
@@ -293,7 +339,7 @@ int run_search_command(Mode mode, const std::vector<std::string>& args) {
     const SearchJob job = parse_job(mode, args);
     // An unknown extension fails now, not after reading the base.
     io::format_from_path(job.base);
-    io::format_from_path(job.query);
+    if (!job.self) io::format_from_path(job.query);
     if (job.forest_trees > 0) {
       if (io::stores_double(job.base)) return run_forest_search<double>(job);
       if (io::format_from_path(job.base) == io::Format::bvecs) return run_forest_search<float, std::uint8_t>(job);

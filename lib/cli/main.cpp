@@ -16,6 +16,8 @@ kdspace knn    --base FILE --query FILE -k K  --out IDS.ivecs [--distances D.fve
 kdspace radius --base FILE --query FILE -r R  --out IDS.ivecs [--distances D.fvecs] [--max-results M] [build options] [--threads T] [--stats]
 kdspace rays   --boxes FILE --rays FILE --out HITS.bin [--build median|sah|sah-nlogn] [--threads T] [--stats]
 kdspace render --boxes FILE --out IMAGE.png [--width W] [--height H]
+kdspace pairs  --base A [--with B] -r R --out PAIRS.pairs [--metric M] [--boxsize L1,L2,...] [--threads T] [--stats]
+kdspace count  --base A [--with B] -r R1,R2,... [--metric M] [--boxsize L1,L2,...]   (JSON: radii, counts)
 kdspace demo   [--out DIR] [--threads T] [--quick]
                runs the whole library on built-in generated data, checks it, prints a table
 kdspace --version | --help
@@ -49,6 +51,8 @@ int dispatch(const std::string& command, const std::vector<std::string>& args) {
   if (command == "demo") return run_demo_command(args);
   if (command == "rays") return run_rays_command(args);
   if (command == "render") return run_render_command(args);
+  if (command == "pairs") return run_pairs_command(args);
+  if (command == "count") return run_count_command(args);
   return -1;
 }
 

@@ -91,10 +91,10 @@ std::size_t Options::count(const std::string& name, std::size_t fallback, std::s
   return static_cast<std::size_t>(v);
 }
 
-double Options::number(const std::string& name, double fallback, double lo, double hi) const {
-  const auto it = values_.find(name);
-  if (it == values_.end()) return fallback;
-  const std::string& s = it->second;
+namespace {
+
+// One number of option `name` in [lo, hi] (finite); UsageError otherwise.
+double parse_number(const std::string& name, const std::string& s, double lo, double hi) {
   char* end = nullptr;
   errno = 0;
   const double v = std::strtod(s.c_str(), &end);
@@ -110,6 +110,27 @@ double Options::number(const std::string& name, double fallback, double lo, doub
   if (!parsed || errno == ERANGE || !std::isfinite(v) || v < lo || v > hi)
     throw UsageError("option " + name + " expects " + range + ", got '" + s + "'");
   return v;
+}
+
+}  // namespace
+
+double Options::number(const std::string& name, double fallback, double lo, double hi) const {
+  const auto it = values_.find(name);
+  if (it == values_.end()) return fallback;
+  return parse_number(name, it->second, lo, hi);
+}
+
+std::vector<double> Options::numbers(const std::string& name, double lo, double hi) const {
+  std::vector<double> out;
+  const auto it = values_.find(name);
+  if (it == values_.end()) return out;
+  std::size_t start = 0;
+  for (;;) {
+    const std::size_t comma = it->second.find(',', start);
+    out.push_back(parse_number(name, it->second.substr(start, comma - start), lo, hi));
+    if (comma == std::string::npos) return out;
+    start = comma + 1;
+  }
 }
 
 std::string Options::choice(const std::string& name, const std::string& fallback,

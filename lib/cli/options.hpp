@@ -41,6 +41,8 @@ class Options {
   std::size_t count(const std::string& name, std::size_t fallback, std::size_t lo, std::size_t hi) const;
   /// A finite number in [lo, hi]; `fallback` when absent.
   double number(const std::string& name, double fallback, double lo, double hi) const;
+  /// Comma-separated finite numbers in [lo, hi] ("1,2.5,3"); empty when absent.
+  std::vector<double> numbers(const std::string& name, double lo, double hi) const;
   /// One of `allowed`; `fallback` when absent.
   std::string choice(const std::string& name, const std::string& fallback,
                      const std::vector<std::string>& allowed) const;

@@ -14,6 +14,17 @@ const char* const knn_about = R"(Finds the K nearest base points of every query 
                        base points an error (exit 1), never silently shortened
 )";
 
+const char* const self_usage =
+    R"(  --self               instead of --query: for each base point its K nearest other points (a point
+                       at the same place is another point), K <= points - 1; a dual-tree self-join
+)";
+
+const char* const boxsize_usage =
+    R"(  --boxsize L1,L2,...  periodic boundaries: the box size of each axis (one value: every axis);
+                       along a periodic axis the distance is min(|d|, L - |d|); base and queries
+                       must lie in [0, L) there; 0 leaves an axis not periodic (SciPy's boxsize)
+)";
+
 const char* const approximate_usage =
     R"(  --eps E              approximate, on the exact tree: the i-th result within (1+E) of the true
                        i-th (default 0: exact)
@@ -63,7 +74,9 @@ std::vector<OptionSpec> option_specs(Mode mode, const SearchCommand& command) {
   std::vector<OptionSpec> specs = {{"--base"},   {"--query"},    {"--out"},         {"--distances"},
                                    {"--axis"},   {"--position"}, {"--leaf"},        {"--max-depth"},
                                    {"--metric"}, {"--threads"},  {"--stats", false}};
+  specs.push_back({"--boxsize", true, command.joins_refused_because});
   if (mode == Mode::knn) {
+    specs.push_back({"--self", false, command.joins_refused_because});
     specs.push_back({"-k"});
     for (const char* approximate : {"--eps", "--forest", "--checks", "--recall"})
       specs.push_back({approximate, true, command.approximate_refused_because});
@@ -98,12 +111,15 @@ void parse_forest_options(const Options& o, SearchJob& job) {
 
 std::string search_usage(Mode mode, const SearchCommand& command) {
   const bool approximate = command.approximate_refused_because.empty();
+  const bool joins = command.joins_refused_because.empty();
   const std::string indent(command.program.size() + (mode == Mode::knn ? 12 : 15), ' ');
+  const std::string queries = mode == Mode::knn && joins ? "(--query FILE | --self)" : "--query FILE";
   std::string text =
       "usage: " + command.program +
-      (mode == Mode::knn ? " knn --base FILE --query FILE -k K" : " radius --base FILE --query FILE -r R") +
+      (mode == Mode::knn ? " knn --base FILE " + queries + " -k K" : " radius --base FILE --query FILE -r R") +
       " --out IDS.ivecs [--distances D.fvecs]\n" + indent;
   if (mode == Mode::radius) text += "[--max-results M] ";
+  if (joins) text += "[--boxsize L1,L2,...] ";
   text += "[build options]";
   if (mode == Mode::knn && approximate)
     text += " [--eps E | --forest T [--checks C] | --recall R [--forest T]]\n" + indent;
@@ -112,11 +128,13 @@ std::string search_usage(Mode mode, const SearchCommand& command) {
   text += "[--threads T] [--stats]\n";
   if (mode == Mode::knn) {
     text += knn_about;
+    if (joins) text += self_usage;
     if (approximate) text += approximate_usage;
   } else {
     text += radius_about;
   }
   text += files_usage;
+  if (joins) text += boxsize_usage;
   text += "  --threads T          " + command.threads_help + "\n";
   text += stats_and_build_usage;
   return text;
@@ -128,7 +146,11 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
   SearchJob job;
   job.mode = mode;
   job.base = o.required("--base");
-  job.query = o.required("--query");
+  job.self = o.has("--self");
+  if (job.self && o.has("--query"))
+    throw UsageError("--self and --query exclude each other: --self searches the base for its own points");
+  if (!job.self) job.query = o.required("--query");
+  job.boxsize = o.numbers("--boxsize", 0, std::numeric_limits<double>::infinity());
   if (mode == Mode::knn) {
     if (!o.has("-k")) throw UsageError("missing option -k");
     job.k = o.count("-k", 0, 1, no_limit);
@@ -160,6 +182,11 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
       if (o.has(exact_only))
         throw UsageError(std::string(exact_only) + " applies to the exact tree, not to --forest or --recall");
     job.build.leaf_size = o.count("--leaf", ForestParams{}.leaf_size, 1, no_limit);
+  }
+  if (job.self || !job.boxsize.empty()) {
+    const std::string joined = job.self ? "--self" : "--boxsize";
+    if (job.forest_trees > 0) throw UsageError(joined + " applies to the exact tree, not to --forest or --recall");
+    if (job.eps > 0) throw UsageError(joined + " searches exactly; it cannot be combined with --eps");
   }
   job.threads = static_cast<unsigned>(o.count("--threads", command.default_threads, 0, 4096));
   job.build.threads = job.threads;

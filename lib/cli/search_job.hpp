@@ -22,6 +22,8 @@ struct SearchCommand {
   std::string program = "kdspace";  ///< as the usage line and the --help hint name it
   /// When set, --eps, --forest, --checks and --recall are refused with this reason (exact search only).
   std::string approximate_refused_because = {};
+  /// When set, --self and --boxsize (searches by the dual-tree joins) are refused with this reason.
+  std::string joins_refused_because = {};
   unsigned default_threads = 0;  ///< --threads when absent; 0 = all hardware threads
   /// The --threads line of the usage text, with the default.
   std::string threads_help = "threads for the build and the queries; 0 (default) = all hardware threads";
@@ -39,6 +41,8 @@ struct SearchJob {
   std::size_t forest_trees = 0;  // 0: the exact tree
   std::size_t checks = 256;
   double recall = 0;  // 0: no tuning
+  bool self = false;            // knn: each base point's K nearest other points; no query file
+  std::vector<double> boxsize;  // periodic boundaries (empty: none)
   unsigned threads = 0;
   bool stats = false;
 };

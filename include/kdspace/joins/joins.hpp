@@ -30,6 +30,7 @@
 #include "kdspace/error.hpp"
 #include "kdspace/index_pair.hpp"
 #include "kdspace/joins/bounded_tree.hpp"
+#include "kdspace/joins/box_rule.hpp"
 #include "kdspace/joins/join_stats.hpp"
 #include "kdspace/joins/run_join.hpp"
 #include "kdspace/joins/space.hpp"
@@ -90,17 +91,41 @@ struct Joins {
   }
 
   static NeighborLists<T> radius(const Tree& queries, const Tree& reference, T r, const JoinParams& params, JoinStats* stats) {
-    std::vector<FoundPair<T>> found = found_within(queries, &reference, r, params, stats);
-    sort_by_first_index(found, queries.size(), [](const FoundPair<T>& x, const FoundPair<T>& y) {
-      return x.dist < y.dist || (x.dist == y.dist && x.b < y.b);
+    return neighbor_lists(found_within(queries, &reference, r, params, stats), queries.size());
+  }
+
+  // ---- one query against a reference prepared once (PeriodicTree) --------------------------------
+
+  static std::vector<Neighbor<T>> knn_one(const Bounded& reference, const std::vector<T>& period, const T* q,
+                                          std::size_t k) {
+    const std::uint32_t index = 0;
+    const Bounded query(q, reference.dim(), &index);
+    const NeighborLists<T> found = with_space(period, [&](const auto& space) {
+      return knn_join_trees<Metric>(query, reference, k, false, space, 1, nullptr);
     });
-    NeighborLists<T> out;
-    out.offsets.assign(queries.size() + 1, 0);
-    for (const auto& f : found) ++out.offsets[std::size_t{f.a} + 1];
-    for (std::size_t q = 0; q < queries.size(); ++q) out.offsets[q + 1] += out.offsets[q];
-    out.neighbors.reserve(found.size());
-    for (const auto& f : found) out.neighbors.push_back(Neighbor<T>{f.b, Metric::to_distance(f.dist)});
-    return out;
+    return std::vector<Neighbor<T>>(found.neighbors.begin(), found.neighbors.end());
+  }
+
+  static std::vector<Neighbor<T>> radius_one(const Bounded& reference, const std::vector<T>& period, const T* q, T r) {
+    const T limit = internal_radius(r);
+    const std::uint32_t index = 0;
+    const Bounded query(q, reference.dim(), &index);
+    const NeighborLists<T> found = neighbor_lists(with_space(period, [&](const auto& space) {
+      return range_join_trees<DistanceSink<T>, FoundPair<T>>(query, reference, limit, false, space, 1, nullptr);
+    }), 1);
+    return std::vector<Neighbor<T>>(found.neighbors.begin(), found.neighbors.end());
+  }
+
+  /// The points in box [lo, hi], which wraps around periodic axes where lo > hi; ascending indices.
+  static std::vector<Index> box_one(const Bounded& reference, const T* lo, const T* hi) {
+    const std::uint32_t index = 0;
+    const Bounded query(lo, reference.dim(), &index);
+    std::vector<Index> found;
+    BoxRule<T, Dim> rule(query, reference, lo, hi, found);
+    JoinStats stats;
+    DualTraversal<BoxRule<T, Dim>>(rule, stats).run(0, 0, {});
+    std::sort(found.begin(), found.end());
+    return found;
   }
 
   static std::vector<IndexPair> pairs(const Tree& a, const Tree* b, T r, const JoinParams& params, JoinStats* stats) {
@@ -174,6 +199,20 @@ struct Joins {
     Count running = 0;
     for (std::size_t j = 0; j < radii.size(); ++j) counts[order[j]] = running += bins[j];
     return counts;
+  }
+
+  // Lists of neighbours by query (rows in original order), each in (distance, index) order.
+  static NeighborLists<T> neighbor_lists(std::vector<FoundPair<T>> found, std::size_t queries) {
+    sort_by_first_index(found, queries, [](const FoundPair<T>& x, const FoundPair<T>& y) {
+      return x.dist < y.dist || (x.dist == y.dist && x.b < y.b);
+    });
+    NeighborLists<T> out;
+    out.offsets.assign(queries + 1, 0);
+    for (const auto& f : found) ++out.offsets[std::size_t{f.a} + 1];
+    for (std::size_t q = 0; q < queries; ++q) out.offsets[q + 1] += out.offsets[q];
+    out.neighbors.reserve(found.size());
+    for (const auto& f : found) out.neighbors.push_back(Neighbor<T>{f.b, Metric::to_distance(f.dist)});
+    return out;
   }
 
   static std::vector<FoundPair<T>> found_within(const Tree& a, const Tree* b, T r, const JoinParams& params,

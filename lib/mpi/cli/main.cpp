@@ -57,7 +57,7 @@ Exit codes: 0 success, 2 usage error, 1 bad data or I/O error (the same on every
 
 const SearchCommand mpi_command{
     "kdspace-mpi", "not available in kdspace-mpi: it searches exactly (use kdspace for approximate search)",
-    1,
+    "not available in kdspace-mpi (use kdspace for --self and --boxsize)", 1,
     "threads a rank for its build and its searches; default 1 (one rank a core); 0 = all hardware threads"};
 
 double seconds_since(double start) {
