@@ -119,6 +119,14 @@ struct Minkowski {
   }
 };
 
+// A loop whose iterations are independent, to be made into vector instructions: the library is
+// compiled with -fopenmp-simd (no OpenMP runtime) and KDSPACE_OMP_SIMD; elsewhere a plain loop.
+#if defined(KDSPACE_OMP_SIMD)
+#define KDSPACE_SIMD_LOOP _Pragma("omp simd")
+#else
+#define KDSPACE_SIMD_LOOP
+#endif
+
 /// Combines the terms of `dim` axes (term_of(i): the metric's term of axis i) in the one fixed order
 /// that internal_distance uses. From 8 axes on, lane j of 8 independent accumulators takes axes j,
 /// j+8, j+16, ... and the lanes are combined pairwise in a fixed order: the lanes are independent, so
@@ -151,15 +159,17 @@ inline T combine_axes(std::size_t dim, TermOf&& term_of) {
 }
 
 /// combine_axes for Count values at once: value j is combine_axes(dim, term_of(., j)), the same bits.
-/// Below 8 axes (no lanes) it goes axis by axis over the Count values, which compilers turn into
-/// vector instructions when the j-th terms lie next to each other (points stored by column); from 8
-/// axes on it is combine_axes itself, one j after the other.
+/// Below 8 axes (no lanes) it goes axis by axis over the Count values, in vector instructions when
+/// the j-th terms lie next to each other (points stored by column; the same operations on each
+/// value, so the same bits); from 8 axes on it is combine_axes itself, one j after the other.
 template <class Metric, std::size_t Count, class T, class TermOf>
 inline std::array<T, Count> combine_axes_many(std::size_t dim, TermOf&& term_of) {
   std::array<T, Count> total{};
   if (dim < distance_lanes) {
-    for (std::size_t i = 0; i < dim; ++i)
+    for (std::size_t i = 0; i < dim; ++i) {
+      KDSPACE_SIMD_LOOP
       for (std::size_t j = 0; j < Count; ++j) total[j] = Metric::accumulate(total[j], T(term_of(i, j)));
+    }
   } else {
     for (std::size_t j = 0; j < Count; ++j)
       total[j] = combine_axes<Metric, T>(dim, [&](std::size_t i) { return term_of(i, j); });

@@ -131,10 +131,16 @@ class CountRule {
  private:
   std::size_t dim() const { return queries_.dim(); }
 
-  // The first bin in [lo, hi] whose radius is >= value (hi when none before it is).
+  // The first bin in [lo, hi] whose radius is >= value (hi when none before it is): a binary search
+  // whose steps choose by a conditional move, not a branch (the comparisons are unpredictable).
   std::uint32_t first_at_least(std::uint32_t lo, std::uint32_t hi, T value) const {
-    while (lo < hi && radii_[lo] < value) ++lo;
-    return lo;
+    const T* first = radii_.data() + lo;
+    for (std::uint32_t n = hi - lo + 1; n > 1;) {
+      const std::uint32_t half = n / 2;
+      first += half * static_cast<std::uint32_t>(first[half - 1] < value);
+      n -= half;
+    }
+    return static_cast<std::uint32_t>(first - radii_.data());
   }
 
   template <class Node>

@@ -62,9 +62,13 @@ struct PairDistance {
 
 namespace detail {
 
-// The largest subtrees a join takes as leaves, compared point by point.
-inline constexpr std::size_t knn_leaf_points = 16;
-inline constexpr std::size_t range_leaf_points = 16;
+// The largest subtrees a join takes as leaves, compared point by point a block of 8 at a time:
+// larger leaves mean fewer pairs of nodes and more distances. Measured (CPU time, 3e5 uniform 3-D
+// points, double, the tree's default leaf of 16): k-NN (k = 10) 16: 0.35 s, 32: 0.30 s, 64: 0.31 s;
+// pairs within r 16: 0.135 s, 32: 0.135 s, 64: 0.105 s, 128: slower; counts at 20 radii 16: 1.21 s,
+// 32: 1.31 s, 64: 1.70 s.
+inline constexpr std::size_t knn_leaf_points = 32;
+inline constexpr std::size_t range_leaf_points = 64;
 inline constexpr std::size_t count_leaf_points = 16;
 
 /// The joins of one tree type; compiled once in the library for the common types.

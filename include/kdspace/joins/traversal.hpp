@@ -22,8 +22,13 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 #include <utility>
 #include <vector>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "kdspace/joins/join_stats.hpp"
 
@@ -99,12 +104,27 @@ class DualTraversal {
   JoinStats& stats_;
 };
 
-/// The bits of the values of a block that are <= limit (bit j for value j): compilers make it one
-/// vector comparison and a mask move, so that a block with nothing near costs no branch per value.
+/// The bits of the values of a block that are <= limit (bit j for value j), so that a block with
+/// nothing near costs no branch per value. With SSE2, a vector comparison and a mask move per two
+/// doubles or four floats (a loop of scalar comparisons would read the block back from memory one
+/// value at a time).
 template <class T, std::size_t N>
 unsigned at_most(const std::array<T, N>& values, T limit) {
   static_assert(N <= 32, "a block fits in the bits of an unsigned");
   unsigned bits = 0;
+#if defined(__SSE2__)
+  if constexpr (std::is_same_v<T, double> && N % 2 == 0) {
+    const __m128d bound = _mm_set1_pd(limit);
+    for (std::size_t j = 0; j < N; j += 2)
+      bits |= static_cast<unsigned>(_mm_movemask_pd(_mm_cmple_pd(_mm_loadu_pd(values.data() + j), bound))) << j;
+    return bits;
+  } else if constexpr (std::is_same_v<T, float> && N % 4 == 0) {
+    const __m128 bound = _mm_set1_ps(limit);
+    for (std::size_t j = 0; j < N; j += 4)
+      bits |= static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(values.data() + j), bound))) << j;
+    return bits;
+  }
+#endif
   for (std::size_t j = 0; j < N; ++j) bits |= static_cast<unsigned>(values[j] <= limit) << j;
   return bits;
 }
