@@ -8,10 +8,8 @@ packages=(
   libpng-dev                                                 # kdspace render
   libeigen3-dev                                              # the blocked scan (library)
   catch2                                                     # tests
-  python3-numpy python3-scipy                                # tests: joins against SciPy's cKDTree
   libflann-dev liblz4-dev                                    # FLANN: validation tests and benchmarks
   libnanoflann-dev libembree-dev                             # benchmark peers
-  python3-pykdtree                                           # joins benchmark peer (with SciPy)
   gnuplot-nox                                                # benchmark plots
   pybind11-dev python3-dev python3-numpy                     # the Python module (python/)
   python3-scipy python3-pytest                               # its tests (SciPy's kd-tree tests run against it)

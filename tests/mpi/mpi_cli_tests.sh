@@ -175,6 +175,8 @@ EOF
   # Usage errors: exit 2 on every rank, the hint names kdspace-mpi.
   expect_failure "approximate options are refused" 2 "option --eps is not available in kdspace-mpi" 2 \
     knn --base uniform.fvecs "${q[@]}" --out ids.ivecs --eps 0.5
+  expect_failure "joins are refused" 2 "option --self is not available in kdspace-mpi" 2 \
+    knn --base uniform.fvecs --self -k 3 --out ids.ivecs
   grep -qF "run 'kdspace-mpi knn --help'" err.txt && pass "usage error hint" || fail "usage error hint" "no hint"
   expect_failure "-k 0 is a usage error" 2 "option -k expects a whole number >= 1, got 0" 2 \
     knn --base uniform.fvecs --query uniform-q.fvecs -k 0 --out ids.ivecs
