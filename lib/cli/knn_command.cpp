@@ -212,7 +212,9 @@ int run_forest_search(const SearchJob& job) {
   params.trees = job.forest_trees;
   params.leaf_size = job.build.leaf_size;
   params.threads = job.threads;
-  Progress build_progress("building the forest", Progress::Kind::elapsed);
+  params.graph = !job.use_graph ? GraphMode::off : job.use_trees ? GraphMode::automatic : GraphMode::on;
+  params.graph_degree = job.degree;
+  Progress build_progress("building the index", Progress::Kind::elapsed);
   Clock::time_point start = Clock::now();
   std::unique_ptr<PointForest<T>> forest;
   try {
@@ -225,19 +227,22 @@ int run_forest_search(const SearchJob& job) {
   const std::size_t points = base.rows;
   base = {};
 
-  ForestSearchParams search_params{job.checks, 0};
+  ForestSearchParams search_params = job.use_trees ? ForestSearchParams{job.checks, 0, 0}
+                                                   : ForestSearchParams{unlimited_checks, 0, job.ef};
   ForestTuning tuning;
   if (job.recall > 0) {
-    Progress tune_progress("tuning the forest", Progress::Kind::elapsed);
+    Progress tune_progress("tuning the search", Progress::Kind::elapsed);
     TuneParams tune_params;
     tune_params.threads = job.threads;
+    tune_params.graph = job.use_graph;
+    tune_params.trees = job.use_trees;
     try {
       tuning = forest->tune(job.recall, job.k, queries.data.data(), queries.rows, tune_params);
     } catch (const Error& e) {
       throw in_query_file(e, job);
     }
     tune_progress.finish();
-    search_params = ForestSearchParams{tuning.checks, tuning.trees};
+    search_params = tuning.search();
   }
 
   QueryStats stats;
@@ -275,8 +280,9 @@ int run_forest_search(const SearchJob& job) {
 
     const double nq = static_cast<double>(queries.rows);
     JsonObject json;
+    const bool graph_search = search_params.ef > 0;
     json.add("command", "knn")
-        .add("method", "forest")
+        .add("method", graph_search ? "graph" : "forest")
         .add("points", std::uint64_t{points})
         .add("dim", std::uint64_t{forest->dim()})
         .add("queries", std::uint64_t{queries.rows})
@@ -286,10 +292,16 @@ int run_forest_search(const SearchJob& job) {
         .add("threads", detail::resolve_threads(job.threads))
         .add("trees_built", std::uint64_t{forest->tree_count()})
         .add("projected_dims", std::uint64_t{forest->projected_dims()})
-        .add("stored_as", forest->compact() ? "bytes" : (sizeof(T) == sizeof(double) ? "double" : "float"))
-        .add("trees", std::uint64_t{search_params.trees == 0 ? forest->tree_count() : search_params.trees})
-        .add("checks", std::uint64_t{search_params.checks})
-        .add("build_s", build_s);
+        .add("stored_as", forest->compact() ? "bytes" : (sizeof(T) == sizeof(double) ? "double" : "float"));
+    if (forest->has_graph())
+      json.add("graph_degree", std::uint64_t{forest->graph_degree()}).add("graph_build_s", forest->graph_build_seconds());
+    if (graph_search) {
+      json.add("ef", std::uint64_t{search_params.ef});
+    } else {
+      json.add("trees", std::uint64_t{search_params.trees == 0 ? forest->tree_count() : search_params.trees})
+          .add("checks", std::uint64_t{search_params.checks});
+    }
+    json.add("build_s", build_s);
     if (job.recall > 0) {
       json.add("target_recall", job.recall)
           .add("tune_s", tuning.seconds)

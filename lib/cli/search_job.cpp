@@ -28,16 +28,24 @@ const char* const boxsize_usage =
 const char* const approximate_usage =
     R"(  --eps E              approximate, on the exact tree: the i-th result within (1+E) of the true
                        i-th (default 0: exact)
-  --forest T           approximate, for high dimensions: T randomized kd-trees (1..1024) searched
-                       together, best bin first, l2 only; the distances returned are exact;
-                       byte-valued points (a .bvecs base) are kept as bytes, a quarter of the memory
+approximate search for high dimensions (l2 only; the distances returned are always exact; a .bvecs
+base is kept as bytes, a quarter of the memory):
+  --recall R           the index chooses: it builds randomized kd-trees and, from dimension 8 on, a
+                       neighbour graph over the points, then finds the fastest search that reaches a
+                       mean recall@K of R (0 < R <= 1) on a sample of the queries (up to 200 choose
+                       the setting, 200 others check it), and searches all queries with it;
+                       with --forest T: the trees only (T of them); with --graph: the graph only
+  --forest T           T randomized kd-trees (1..1024) searched together, best bin first
   --checks C           with --forest: points scored per query (default 256); more is slower and
                        finds more of the true neighbours
-  --recall R           tune the forest (T trees, default 8) for a mean recall@K of R (0 < R <= 1)
-                       on a sample of the queries (up to 200 choose the setting, 200 others check
-                       it), then search all queries with the setting found
-                       With --forest or --recall, --stats adds trees, checks, and the recall
-                       measured on up to 200 of the queries against exact answers.
+  --graph              the neighbour graph, searched best first from the leaf of a kd-tree
+  --ef E               with --graph: the best E points found are kept while searching (default
+                       64, at least K); more is slower and finds more of the true neighbours
+  --degree D           with --graph or --recall: neighbours a point keeps in the graph (2..1024,
+                       default 32)
+                       With --recall, --forest or --graph, --stats adds method (graph or forest),
+                       ef or trees and checks, graph_build_s, tune_s, and the recall measured on
+                       up to 200 of the queries against exact answers.
 )";
 
 const char* const radius_about =
@@ -78,8 +86,9 @@ std::vector<OptionSpec> option_specs(Mode mode, const SearchCommand& command) {
   if (mode == Mode::knn) {
     specs.push_back({"--self", false, command.joins_refused_because});
     specs.push_back({"-k"});
-    for (const char* approximate : {"--eps", "--forest", "--checks", "--recall"})
+    for (const char* approximate : {"--eps", "--recall", "--forest", "--checks", "--ef", "--degree"})
       specs.push_back({approximate, true, command.approximate_refused_because});
+    specs.push_back({"--graph", false, command.approximate_refused_because});
   } else {
     specs.push_back({"-r"});
     specs.push_back({"--max-results"});
@@ -87,23 +96,35 @@ std::vector<OptionSpec> option_specs(Mode mode, const SearchCommand& command) {
   return specs;
 }
 
-// --forest, --checks, --recall: which approximate search, and the rules that keep them apart.
-void parse_forest_options(const Options& o, SearchJob& job) {
-  const bool forest = o.has("--forest"), tune = o.has("--recall");
-  if (!forest && !tune) {
+// --recall, --forest, --checks, --graph, --ef, --degree: which approximate search, and the rules
+// that keep them apart.
+void parse_approximate_options(const Options& o, SearchJob& job) {
+  const bool forest = o.has("--forest"), graph = o.has("--graph"), tune = o.has("--recall");
+  if (!forest && !graph && !tune) {
     if (o.has("--checks")) throw UsageError("--checks needs --forest");
+    if (o.has("--ef")) throw UsageError("--ef needs --graph");
+    if (o.has("--degree")) throw UsageError("--degree needs --graph or --recall");
     return;
   }
   if (o.has("--eps"))
-    throw UsageError("--eps applies to the exact tree; it cannot be combined with --forest or --recall");
-  job.forest_trees = o.count("--forest", 8, 1, 1024);
+    throw UsageError("--eps applies to the exact tree; it cannot be combined with --recall, --forest or --graph");
+  if (forest && graph) throw UsageError("--forest and --graph exclude each other: one searches the trees, the other the graph");
+  if (tune)
+    for (const char* option : {"--checks", "--ef"})
+      if (o.has(option)) throw UsageError(std::string(option) + " and --recall exclude each other: --recall chooses it");
+  if (o.has("--checks") && !forest) throw UsageError("--checks needs --forest");
+  if (o.has("--ef") && !graph) throw UsageError("--ef needs --graph");
+  if (o.has("--degree") && forest) throw UsageError("--degree applies to the graph, not to --forest");
+  job.use_trees = forest || !graph;
+  job.use_graph = graph || !forest;
+  job.forest_trees = o.count("--forest", graph ? ForestParams{}.trees : 8, 1, 1024);
+  job.degree = o.count("--degree", ForestParams{}.graph_degree, 2, 1024);
   if (tune) {
-    if (o.has("--checks"))
-      throw UsageError("--checks and --recall exclude each other: --recall chooses the checks");
     job.recall = o.number("--recall", 0.0, 0.0, 1.0);
     if (!(job.recall > 0)) throw UsageError("--recall must be in (0, 1], got " + o.text("--recall"));
   } else {
     job.checks = o.count("--checks", 256, 1, std::numeric_limits<std::size_t>::max());
+    job.ef = o.count("--ef", 64, 1, std::numeric_limits<std::size_t>::max());
   }
 }
 
@@ -122,7 +143,7 @@ std::string search_usage(Mode mode, const SearchCommand& command) {
   if (joins) text += "[--boxsize L1,L2,...] ";
   text += "[build options]";
   if (mode == Mode::knn && approximate)
-    text += " [--eps E | --forest T [--checks C] | --recall R [--forest T]]\n" + indent;
+    text += " [--eps E | --recall R | --forest T [--checks C] |\n" + indent + " --graph [--ef E] [--degree D]]\n" + indent;
   else
     text += " ";
   text += "[--threads T] [--stats]\n";
@@ -155,7 +176,7 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
     if (!o.has("-k")) throw UsageError("missing option -k");
     job.k = o.count("-k", 0, 1, no_limit);
     job.eps = o.number("--eps", 0.0, 0.0, std::numeric_limits<double>::infinity());
-    parse_forest_options(o, job);
+    parse_approximate_options(o, job);
   } else {
     if (!o.has("-r")) throw UsageError("missing option -r");
     job.radius = o.number("-r", 0.0, 0.0, std::numeric_limits<double>::infinity());
@@ -177,10 +198,10 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
   job.build.max_depth = o.count("--max-depth", defaults.max_depth, 0, 256);
   job.metric = o.choice("--metric", "l2", {"l2", "l1", "linf"});
   if (job.forest_trees > 0) {
-    if (job.metric != "l2") throw UsageError("--forest and --recall search with --metric l2 only");
+    if (job.metric != "l2") throw UsageError("--recall, --forest and --graph search with --metric l2 only");
     for (const char* exact_only : {"--axis", "--position", "--max-depth"})
       if (o.has(exact_only))
-        throw UsageError(std::string(exact_only) + " applies to the exact tree, not to --forest or --recall");
+        throw UsageError(std::string(exact_only) + " applies to the exact tree, not to --recall, --forest or --graph");
     job.build.leaf_size = o.count("--leaf", ForestParams{}.leaf_size, 1, no_limit);
   }
   if (job.self || !job.boxsize.empty()) {

@@ -20,7 +20,8 @@ enum class Mode { knn, radius };
 /// What differs between the commands that share these options.
 struct SearchCommand {
   std::string program = "kdspace";  ///< as the usage line and the --help hint name it
-  /// When set, --eps, --forest, --checks and --recall are refused with this reason (exact search only).
+  /// When set, --eps, --recall, --forest, --checks, --graph, --ef and --degree are refused with this
+  /// reason (exact search only).
   std::string approximate_refused_because = {};
   /// When set, --self and --boxsize (searches by the dual-tree joins) are refused with this reason.
   std::string joins_refused_because = {};
@@ -38,8 +39,12 @@ struct SearchJob {
   double radius = 0;
   std::size_t max_results = std::numeric_limits<std::size_t>::max();
   double eps = 0;
-  std::size_t forest_trees = 0;  // 0: the exact tree
+  std::size_t forest_trees = 0;  // 0: the exact tree; else the trees built for the approximate index
   std::size_t checks = 256;
+  bool use_graph = false;  // the graph is searched (with ef) or, with --recall, may be chosen
+  bool use_trees = false;  // the trees are searched (with checks) or, with --recall, may be chosen
+  std::size_t ef = 64;
+  std::size_t degree = ForestParams{}.graph_degree;
   double recall = 0;  // 0: no tuning
   bool self = false;            // knn: each base point's K nearest other points; no query file
   std::vector<double> boxsize;  // periodic boundaries (empty: none)

@@ -19,6 +19,7 @@
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
 #include "kdspace/points/detail/row_distances.hpp"
+#include "forest_scratch.hpp"
 
 namespace kdspace {
 namespace {
@@ -160,6 +161,11 @@ void check_params(const ForestParams& p) {
   if (p.candidate_axes == 0) throw Error("forest: candidate_axes must be at least 1");
   if (p.variance_sample < 2) throw Error("forest: variance_sample must be at least 2");
   if (p.pca && p.pca_sample < 2) throw Error("forest: pca_sample must be at least 2");
+  if (p.graph_degree < 2 || p.graph_degree > 1024)
+    throw Error("forest: graph_degree must be in 2..1024, got " + std::to_string(p.graph_degree));
+  if (p.graph_build_ef == 0) throw Error("forest: graph_build_ef must be at least 1");
+  if (!(p.graph_alpha >= 1 && p.graph_alpha <= 16))
+    throw Error("forest: graph_alpha must be in [1, 16], got " + std::to_string(p.graph_alpha));
 }
 
 }  // namespace
@@ -280,6 +286,8 @@ void PointForest<T>::build(const U* rows, std::size_t n, std::size_t dim, const 
   else gather(points_);
   for (Tree& tree : trees_)
     for (std::uint32_t& row : tree.order) row = row_of[row];
+
+  if (params.graph == GraphMode::on || (params.graph == GraphMode::automatic && dim >= graph_min_dim)) build_graph();
 }
 
 template <class T>
@@ -312,93 +320,31 @@ template <class T>
 std::size_t PointForest<T>::index_bytes() const {
   std::size_t bytes = ids_.capacity() * sizeof(std::uint32_t) + (mean_.capacity() + projection_.capacity()) * sizeof(double);
   for (const Tree& t : trees_) bytes += t.nodes.capacity() * sizeof(Node) + t.order.capacity() * sizeof(std::uint32_t);
-  return bytes;
+  return bytes + graph_.bytes();
 }
 
 // ---- search ---------------------------------------------------------------------------------------
 
-/// Per-thread working memory of a query: reused from query to query, so a query allocates nothing
-/// once it has grown. `stamp[row] == epoch` marks a row already scored by the current query.
-///
-/// A cell's bound is the sum over projected axes of one term each (the squared gap from the query
-/// to the cell along that axis, 0 where the query lies within). Going to a far child replaces one
-/// axis's term, so a queued branch keeps its cell's terms as a trail: the one term it changed and
-/// the trail of the cell it was queued from. Entering a branch rebuilds the terms from the trail
-/// (the newest term of an axis wins) without walking the tree from its root again.
-template <class T>
-struct PointForest<T>::Scratch {
-  static constexpr std::uint32_t no_trail = 0xffffffffu;
-  struct Branch {
-    double bound;  // squared distance from the projected query to the branch's cell
-    std::uint32_t tree;
-    std::uint32_t node;
-    std::uint32_t trail;  // the cell's last changed term, in `trail`
-  };
-  struct Term {
-    double value;
-    std::uint32_t axis;
-    std::uint32_t parent;  // the rest of the cell's terms (no_trail: all others 0)
-  };
-  // Min-heap on (bound, tree, node): the order does not depend on anything but the query.
-  struct After {
-    bool operator()(const Branch& a, const Branch& b) const {
-      if (a.bound != b.bound) return a.bound > b.bound;
-      if (a.tree != b.tree) return a.tree > b.tree;
-      return a.node > b.node;
-    }
-  };
-
-  std::vector<double> query;     // projected query
-  std::vector<double> terms;     // per projected axis, its term in the current cell's bound
-  std::vector<std::uint8_t> set;  // per projected axis: its term was set by enter()
-  std::vector<std::uint32_t> touched;
-  std::vector<Branch> heap;
-  std::vector<Term> trail;
-  std::vector<std::uint32_t> arriving, ready;  // rows of the leaf being reached, and of the one before
-  std::vector<std::uint32_t> stamp;
-  std::uint32_t epoch = 0;
-  std::vector<detail::Candidate<T>> results;
-
-  void start(std::size_t n, std::size_t m) {
-    if (stamp.size() != n) stamp.assign(n, 0), epoch = 0;
-    if (++epoch == 0) std::fill(stamp.begin(), stamp.end(), 0u), epoch = 1;
-    query.resize(m);
-    terms.assign(m, 0.0);
-    set.assign(m, 0);
-    heap.clear();
-    trail.clear();
-    arriving.clear();
-    ready.clear();
-  }
-
-  // Sets `terms` to those of the cell whose trail starts at `t`; `touched` lists the axes set.
-  void enter(std::uint32_t t) {
-    for (; t != no_trail; t = trail[t].parent) {
-      const Term& term = trail[t];
-      if (set[term.axis]) continue;  // a newer term of this axis holds
-      set[term.axis] = 1;
-      terms[term.axis] = term.value;
-      touched.push_back(term.axis);
-    }
-  }
-  void leave() {
-    for (std::uint32_t axis : touched) terms[axis] = 0, set[axis] = 0;
-    touched.clear();
-  }
-};
-
 namespace {
-void check_search(const ForestSearchParams& s, std::size_t k, std::size_t n) {
+void check_search(const ForestSearchParams& s, std::size_t k, std::size_t n, bool has_graph) {
   detail::check_k(k, n);
   if (s.checks == 0) throw Error("checks must be at least 1");
+  if (s.ef > 0 && !has_graph) throw Error("ef > 0 searches the graph, and this forest has none (ForestParams::graph)");
 }
 }  // namespace
 
 template <class T>
 void PointForest<T>::search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& s,
                             QueryStats& stats, Neighbor<T>* out) const {
-  if (compact()) search_rows(bytes_.data(), q, k, search, s, stats, out);
-  else search_rows(points_.data(), q, k, search, s, stats, out);
+  if (search.ef > 0 && search.ef < size()) {
+    if (compact()) search_graph(bytes_.data(), q, k, search.ef, s, stats, out);
+    else search_graph(points_.data(), q, k, search.ef, s, stats, out);
+    return;
+  }
+  // The trees; with the graph's unlimited budget, the exact answer from them.
+  const ForestSearchParams trees = search.ef > 0 ? ForestSearchParams{unlimited_checks, 0, 0} : search;
+  if (compact()) search_rows(bytes_.data(), q, k, trees, s, stats, out);
+  else search_rows(points_.data(), q, k, trees, s, stats, out);
 }
 
 template <class T>
@@ -545,7 +491,7 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
 template <class T>
 std::vector<Neighbor<T>> PointForest<T>::knn(const T* q, std::size_t k, const ForestSearchParams& search_params,
                                              QueryStats* stats) const {
-  check_search(search_params, k, size());
+  check_search(search_params, k, size(), has_graph());
   detail::check_finite(q, dim_, "query");
   thread_local Scratch scratch;
   QueryStats local;
@@ -559,7 +505,7 @@ template <class T>
 NeighborLists<T> PointForest<T>::knn_batch(const T* queries, std::size_t nq, std::size_t k,
                                            const ForestSearchParams& search_params, unsigned threads,
                                            QueryStats* stats) const {
-  check_search(search_params, k, size());
+  check_search(search_params, k, size(), has_graph());
   detail::check_query_rows(queries, nq, dim_);
   NeighborLists<T> out;
   out.offsets.resize(nq + 1);
@@ -578,5 +524,15 @@ NeighborLists<T> PointForest<T>::knn_batch(const T* queries, std::size_t nq, std
 
 template class PointForest<float>;
 template class PointForest<double>;
+// The graph's search falls back on the trees' (point_forest_graph.cpp).
+template void PointForest<float>::search_rows(const float*, const float*, std::size_t, const ForestSearchParams&,
+                                              Scratch&, QueryStats&, Neighbor<float>*) const;
+template void PointForest<float>::search_rows(const std::uint8_t*, const float*, std::size_t,
+                                              const ForestSearchParams&, Scratch&, QueryStats&, Neighbor<float>*) const;
+template void PointForest<double>::search_rows(const double*, const double*, std::size_t, const ForestSearchParams&,
+                                               Scratch&, QueryStats&, Neighbor<double>*) const;
+template void PointForest<double>::search_rows(const std::uint8_t*, const double*, std::size_t,
+                                               const ForestSearchParams&, Scratch&, QueryStats&,
+                                               Neighbor<double>*) const;
 
 }  // namespace kdspace

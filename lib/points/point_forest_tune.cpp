@@ -1,13 +1,15 @@
-// PointForest: exact answers by the blocked scan, and the choice of (trees, checks) for a target
-// recall.
+// PointForest: exact answers by the blocked scan, and the choice of a setting (the graph's ef, or the
+// trees' trees and checks) for a target recall.
 //
-// Tuning. Sample base points serve as queries, each left out of its own answers (the search asks for
-// k + 1 neighbours and drops the query point itself), so that no query file is needed and the
-// answers are those of a point not in the data. Half the sample chooses the setting, the other half
-// checks it. For each number of trees (1, 2, 4, ... up to the forest's), the budget doubles from 16
-// until the recall is reached, then a bisection narrows it (recall never falls as the budget grows:
-// a larger budget only continues the same search). Each candidate is timed on one thread; the
-// fastest wins. A number of trees whose search is already slower than the best found stops early.
+// Tuning. Sample queries (or sample base points, each left out of its own answers: the search asks
+// for k + 1 neighbours and drops the query point itself) are split in two: one half chooses the
+// setting, the other checks it. For the graph, and for each number of trees (1, 2, 4, ... up to the
+// forest's), the budget (ef from k, checks from 16) doubles until the recall is reached, then a
+// bisection narrows it (for the trees, recall never falls as the budget grows: a larger budget only
+// continues the same search; for the graph, a larger pool keeps what a smaller one found as long
+// as the search takes the same path, so recall falls only rarely, and by little). Each candidate is
+// timed on one thread; the fastest wins. A search whose budget is already slower than the best found
+// stops early.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -154,26 +156,45 @@ ForestTuning PointForest<T>::tune_on(double target_recall, std::size_t k, const 
     double seconds;
   };
   // Recall and single-thread time of one setting on [first, first + count) of the sample.
-  auto evaluate = [&](std::size_t trees, std::size_t checks, std::size_t first, std::size_t count,
+  auto evaluate = [&](const ForestSearchParams& params, std::size_t first, std::size_t count,
                       const NeighborLists<T>& exact) {
     ++best.settings_tried;
-    const ForestSearchParams params{checks, trees};
     const Clock::time_point t0 = Clock::now();
     const NeighborLists<T> wide = knn_batch(queries.data() + first * dim_, count, k + extra, params, 1);
     const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     return Outcome{recall_at_k(answers_of_sample(wide, 0, count, k, self, first), exact), seconds};
   };
 
+  // The searches to choose from: the graph (budget ef, from k), and the first t trees for t = 1, 2,
+  // 4, ... (budget checks, from 16). The graph goes first: where it is faster, the trees' budgets
+  // stop climbing as soon as they are slower.
+  struct Family {
+    bool graph;
+    std::size_t trees;
+    std::size_t first_budget;
+    std::size_t least_budget;  // smaller ones search the same as this one
+    ForestSearchParams at(std::size_t budget) const {
+      return graph ? ForestSearchParams{unlimited_checks, 0, budget} : ForestSearchParams{budget, trees, 0};
+    }
+  };
+  std::vector<Family> families;
+  if (tp.graph && has_graph()) families.push_back({true, 0, k + extra, k + extra});  // a pool holds k + extra
+  if (tp.trees || families.empty()) {
+    for (std::size_t t = 1; t < tree_count(); t *= 2) families.push_back({false, t, 16, 1});
+    families.push_back({false, tree_count(), 16, 1});
+  }
   const std::size_t cap = tp.max_checks == 0 ? n : std::min(tp.max_checks, n);
-  std::vector<std::size_t> tree_options;
-  for (std::size_t t = 1; t < tree_count(); t *= 2) tree_options.push_back(t);
-  tree_options.push_back(tree_count());
 
+  auto choose = [&](const Family& f, std::size_t budget, const Outcome& o, double seconds) {
+    const ForestSearchParams p = f.at(budget);
+    best.trees = p.trees, best.checks = p.checks, best.ef = p.ef, best.tuning_recall = o.recall;
+    best.queries_per_s = static_cast<double>(half) / seconds;
+  };
   double best_seconds = std::numeric_limits<double>::infinity();
   double best_recall = -1;  // when no setting reaches the target: the one that comes closest
-  for (const std::size_t trees : tree_options) {
-    std::size_t low = 0, high = std::min<std::size_t>(16, cap);
-    Outcome at_high = evaluate(trees, high, 0, half, exact_tuning);
+  for (const Family& f : families) {
+    std::size_t low = std::min(f.least_budget, cap) - 1, high = std::min(f.first_budget, cap);
+    Outcome at_high = evaluate(f.at(high), 0, half, exact_tuning);
     bool too_slow = false;
     while (at_high.recall < target_recall && high < cap) {
       if (at_high.seconds > best_seconds) {
@@ -182,41 +203,40 @@ ForestTuning PointForest<T>::tune_on(double target_recall, std::size_t k, const 
       }
       low = high;
       high = std::min(2 * high, cap);
-      at_high = evaluate(trees, high, 0, half, exact_tuning);
+      at_high = evaluate(f.at(high), 0, half, exact_tuning);
     }
     if (too_slow) continue;
     if (at_high.recall < target_recall) {
       if (at_high.recall > best_recall && best_seconds == std::numeric_limits<double>::infinity()) {
         best_recall = at_high.recall;
-        best.trees = trees, best.checks = high, best.tuning_recall = at_high.recall;
-        best.queries_per_s = static_cast<double>(half) / at_high.seconds;
+        choose(f, high, at_high, at_high.seconds);
       }
       continue;
     }
     while (high - low > std::max<std::size_t>(1, high / 8)) {
       const std::size_t mid = low + (high - low) / 2;
-      const Outcome at_mid = evaluate(trees, mid, 0, half, exact_tuning);
+      const Outcome at_mid = evaluate(f.at(mid), 0, half, exact_tuning);
       if (at_mid.recall >= target_recall) high = mid, at_high = at_mid;
       else low = mid;
     }
     // Time the chosen budget once more; the faster of the two runs counts.
-    const Outcome again = evaluate(trees, high, 0, half, exact_tuning);
+    const Outcome again = evaluate(f.at(high), 0, half, exact_tuning);
     const double seconds = std::min(at_high.seconds, again.seconds);
     if (seconds < best_seconds) {
       best_seconds = seconds;
-      best.trees = trees, best.checks = high, best.tuning_recall = at_high.recall;
-      best.queries_per_s = static_cast<double>(half) / seconds;
+      choose(f, high, at_high, seconds);
     }
   }
 
   // Check on the held-out half; if it falls short, widen the budget an eighth at a time until it does
   // not (doubling would overshoot: the budget the tuning half needed is usually nearly enough).
   if (validation_count > 0) {
-    Outcome held_out = evaluate(best.trees, best.checks, validation_first, validation_count, exact_validation);
-    while (held_out.recall < target_recall && best.checks < cap) {
-      best.checks = std::min(best.checks + std::max<std::size_t>(1, best.checks / 8), cap);
-      held_out = evaluate(best.trees, best.checks, validation_first, validation_count, exact_validation);
-      const Outcome tuned = evaluate(best.trees, best.checks, 0, half, exact_tuning);
+    std::size_t& budget = best.ef > 0 ? best.ef : best.checks;
+    Outcome held_out = evaluate(best.search(), validation_first, validation_count, exact_validation);
+    while (held_out.recall < target_recall && budget < cap) {
+      budget = std::min(budget + std::max<std::size_t>(1, budget / 8), cap);
+      held_out = evaluate(best.search(), validation_first, validation_count, exact_validation);
+      const Outcome tuned = evaluate(best.search(), 0, half, exact_tuning);
       best.tuning_recall = tuned.recall;
       best.queries_per_s = static_cast<double>(half) / tuned.seconds;
     }

@@ -40,9 +40,20 @@
 #include <vector>
 
 #include "kdspace/error.hpp"
+#include "kdspace/points/detail/neighbor_graph.hpp"
 #include "kdspace/points/neighbor.hpp"
 
 namespace kdspace {
+
+/// Whether PointForest builds its neighbour graph.
+enum class GraphMode {
+  automatic,  ///< where it answers faster than the trees at equal recall: dim >= graph_min_dim
+  on,
+  off,
+};
+
+/// GraphMode::automatic builds the graph from this dimension on (README, "Graph or trees").
+inline constexpr std::size_t graph_min_dim = 8;
 
 struct ForestParams {
   /// Number of randomized trees (>= 1). A search may use fewer of them (ForestSearchParams::trees).
@@ -70,7 +81,18 @@ struct ForestParams {
   std::size_t pca_sample = 20000;
   /// Seed of the random draws; the same seed gives the same forest.
   std::uint64_t seed = 1;
-  /// Threads for the build; 0 = all hardware threads. The forest does not depend on it.
+  /// The neighbour graph: built or not (see the top of this file).
+  GraphMode graph = GraphMode::automatic;
+  /// Most neighbours a point keeps in the graph (2..1024). Its lists take 4 * graph_degree bytes a
+  /// point.
+  std::size_t graph_degree = 32;
+  /// Pool of the search that finds each point's neighbours while the graph is built (>= 1): larger
+  /// builds slower, and a graph that reaches a recall with fewer points scored.
+  std::size_t graph_build_ef = 24;
+  /// Slack of the graph's pruning rule (>= 1): a point's neighbour c is dropped when one kept before
+  /// it, w, has graph_alpha * |c - w| <= |p - c|. Larger keeps more edges.
+  double graph_alpha = 1.2;
+  /// Threads for the build; 0 = all hardware threads. The forest and its graph do not depend on it.
   unsigned threads = 1;
 };
 
@@ -78,16 +100,25 @@ struct ForestParams {
 inline constexpr std::size_t unlimited_checks = static_cast<std::size_t>(-1);
 
 struct ForestSearchParams {
-  /// Points scored per query before the search stops (>= 1; it goes on until k are in hand).
+  /// Trees: points scored per query before the search stops (>= 1; it goes on until k are in hand);
+  /// unlimited_checks: the exact answer.
   std::size_t checks = 256;
-  /// Trees searched: the first `trees` of the forest; 0 = all.
+  /// Trees: the first `trees` of the forest are searched; 0 = all.
   std::size_t trees = 0;
+  /// 0: search the trees (with checks and trees above). Else search the graph, keeping the `ef`
+  /// best points found (at least k are kept, whatever ef says; larger is slower and finds more of
+  /// the true neighbours); unlimited_checks (or any ef >= size()): the exact answer, from the trees.
+  std::size_t ef = 0;
 };
 
-/// A (trees, checks) setting chosen by PointForest::tune(), with what was measured for it.
+/// A setting chosen by PointForest::tune() (the graph's ef, or the trees' trees and checks), with what
+/// was measured for it.
 struct ForestTuning {
   std::size_t trees = 0;
   std::size_t checks = 0;
+  std::size_t ef = 0;  ///< > 0: the graph was chosen
+  /// The setting, to pass to knn() and knn_batch().
+  ForestSearchParams search() const { return ForestSearchParams{checks, trees, ef}; }
   double target_recall = 0;
   double tuning_recall = 0;      ///< mean recall@k on the queries it was chosen with
   double validation_recall = 0;  ///< mean recall@k on held-out queries, not used to choose
@@ -102,11 +133,16 @@ struct TuneParams {
   /// Base points used as queries to choose the setting, and as many again to validate it (each is
   /// left out of its own answers).
   std::size_t sample_queries = 200;
-  /// Largest budget tried; 0 = the number of points (an exhaustive search always reaches any recall).
+  /// Largest budget (checks or ef) tried; 0 = the number of points (then the search is exact, and
+  /// reaches any recall).
   std::size_t max_checks = 0;
   std::uint64_t seed = 7;
   /// Threads for the exact answers of the sample; the timed searches run on one thread.
   unsigned threads = 0;
+  /// The searches tune() may choose from: the graph (when the forest has one) and the trees. With
+  /// neither allowed, or only the graph and no graph built, the trees.
+  bool graph = true;
+  bool trees = true;
 };
 
 template <class T>
@@ -144,6 +180,11 @@ class PointForest {
   std::size_t projected_dims() const { return projected_dims_; }
   /// Whether the points are kept as bytes (ForestParams::compact and byte-valued data).
   bool compact() const { return !bytes_.empty(); }
+  /// Whether the neighbour graph was built (ForestParams::graph), and the width of its lists.
+  bool has_graph() const { return !graph_.empty(); }
+  std::size_t graph_degree() const { return graph_.degree; }
+  /// Wall seconds the build spent on the graph (0 without one).
+  double graph_build_seconds() const { return graph_build_s_; }
   /// Deepest leaf over all trees.
   std::size_t depth() const;
   std::size_t leaf_count() const;
@@ -168,7 +209,8 @@ class PointForest {
   /// re-check, as PointTree's BatchMethod::scan): the reference answers for recall.
   NeighborLists<T> knn_exact_batch(const T* queries, std::size_t nq, std::size_t k, unsigned threads = 0) const;
 
-  /// The cheapest (trees, checks) whose mean recall@k reaches `target_recall` (in (0, 1]) on sample
+  /// The cheapest setting (the graph's ef, or trees and checks; TuneParams::graph and ::trees say
+  /// which may be chosen) whose mean recall@k reaches `target_recall` (in (0, 1]) on sample
   /// queries; cheapest by measured time. Exact answers come from the blocked scan. The setting is
   /// then checked on as many other sample queries (validation_recall); if it falls short there, the
   /// budget grows an eighth at a time until it does not (or reaches max_checks). The sample is drawn
@@ -201,6 +243,12 @@ class PointForest {
 
   void search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch, QueryStats& stats,
               Neighbor<T>* out) const;
+  template <class U>
+  void search_graph(const U* points, const T* q, std::size_t k, std::size_t ef, Scratch& scratch, QueryStats& stats,
+                    Neighbor<T>* out) const;
+  void build_graph();
+  /// The leaf of the first tree that the query falls in: rows [first, first + count).
+  void entry_leaf(const T* q, Scratch& scratch, std::uint32_t& first, std::uint32_t& count) const;
   template <class U>  // U: T, or std::uint8_t when compact
   void search_rows(const U* points, const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch,
                    QueryStats& stats, Neighbor<T>* out) const;
@@ -217,6 +265,8 @@ class PointForest {
   std::vector<double> projection_;    // dim x projected_dims, row-major: column j = direction j
   std::vector<Tree> trees_;
   double extent_ = 0;                 // largest |x - mean| over the points
+  detail::NeighborGraph graph_;       // over the rows of points_ / bytes_
+  double graph_build_s_ = 0;
 };
 
 /// Mean recall@k of `found` against `exact` (row by row, the same k in both): the share of the k

@@ -45,7 +45,8 @@ Exact k-NN and radius search over P MPI ranks, with the options, files and outpu
 'kdspace radius': the same bytes whatever P. Each rank reads its own part of the base and query files
 (the binary formats by seeking to its rows; .csv by its share of the bytes), the points go to the rank
 that owns their region of space, and each rank builds a kd-tree over its region.
-Not available here: --eps, --forest, --checks, --recall (approximate search; use kdspace).
+Not available here: --eps, --recall, --forest, --checks, --graph, --ef, --degree (approximate search;
+use kdspace).
 --threads T: threads a rank, default 1 (one rank a core); 0 = all hardware threads.
 --stats (rank 0): one JSON object with kdspace's keys (points and nodes summed over ranks, depth the
   deepest rank's tree) and ranks, read_s, rounds, ranks_per_query, messages, bytes,

@@ -1,0 +1,155 @@
+// The best-first search over a NeighborGraph, shared by PointForest's queries and by the graph's own
+// build (which searches the graph for each point's neighbours).
+//
+// The search keeps the `ef` best points found so far (the pool), in result order, each marked once
+// its list has been read. It starts from a few entry points, then repeatedly reads the list of the
+// best point not yet expanded and scores every neighbour not seen before; it ends when every point
+// of the pool is expanded (Malkov & Yashunin, "Efficient and robust approximate nearest neighbor
+// search using Hierarchical Navigable Small World graphs", 2018, Alg. 2; Fu et al., "Fast
+// Approximate Nearest Neighbor Search With The Navigating Spreading-out Graph", 2019, Alg. 1).
+//
+// What it costs is mostly waiting for rows: the rows of a list's new points are asked for
+// (prefetched) together as soon as the list is read, and scored four at a time (row_distances.hpp:
+// the same bits as internal_distance()), so every distance in the pool is exact.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "kdspace/points/detail/neighbor_graph.hpp"
+#include "kdspace/points/detail/result_sets.hpp"
+#include "kdspace/points/detail/row_distances.hpp"
+#include "kdspace/points/neighbor.hpp"
+
+namespace kdspace::detail {
+
+/// The `ef` best points found, in (distance, row) order; a row's top bit marks it expanded (rows
+/// are below 2^30).
+template <class T>
+class GraphPool {
+ public:
+  static constexpr std::uint32_t expanded_bit = 0x80000000u;
+
+  void reset(std::size_t ef) {
+    ef_ = ef;
+    size_ = 0;
+    items_.resize(ef);
+  }
+  std::size_t size() const { return size_; }
+  /// A point farther than this cannot enter (infinite while the pool is not full).
+  T bound() const { return size_ == ef_ ? items_[size_ - 1].dist : std::numeric_limits<T>::infinity(); }
+  T dist(std::size_t i) const { return items_[i].dist; }
+  std::uint32_t row(std::size_t i) const { return items_[i].index & ~expanded_bit; }
+  bool expanded(std::size_t i) const { return (items_[i].index & expanded_bit) != 0; }
+  void expand(std::size_t i) { items_[i].index |= expanded_bit; }
+
+  /// Inserts a point not in the pool; returns its position, or ef when it does not enter.
+  std::size_t insert(T dist, std::uint32_t row) {
+    auto before = [&](const Candidate<T>& c) {  // (dist, row) comes before c
+      return dist < c.dist || (dist == c.dist && row < (c.index & ~expanded_bit));
+    };
+    if (size_ == ef_ && !before(items_[size_ - 1])) return ef_;
+    std::size_t pos = size_ == ef_ ? size_ - 1 : size_;
+    while (pos > 0 && before(items_[pos - 1])) {
+      items_[pos] = items_[pos - 1];
+      --pos;
+    }
+    items_[pos] = Candidate<T>{dist, row};
+    if (size_ < ef_) ++size_;
+    return pos;
+  }
+
+ private:
+  std::size_t ef_ = 0, size_ = 0;
+  std::vector<Candidate<T>> items_;
+};
+
+/// Per-thread working memory of graph searches, reused from search to search (nothing is
+/// allocated once it has grown). seen[row] == epoch marks a row scored by the current search.
+template <class T>
+struct GraphScratch {
+  std::vector<std::uint32_t> seen;
+  std::uint32_t epoch = 0;
+  GraphPool<T> pool;
+  std::vector<std::uint32_t> fresh;
+
+  void start(std::size_t n, std::size_t ef) {
+    if (seen.size() != n) seen.assign(n, 0), epoch = 0;
+    if (++epoch == 0) std::fill(seen.begin(), seen.end(), 0u), epoch = 1;
+    pool.reset(ef);
+  }
+};
+
+/// Best-first search of `graph` over `rows` (n rows of `dim` values of U: T, or bytes) for the query
+/// q, from `entries` (rows; repeats are skipped), keeping the ef best: on return s.pool holds them
+/// in (distance, row) order with exact internal distances. Adds to stats.points_visited (points
+/// scored) and stats.nodes_visited (lists read).
+template <class T, class U>
+void graph_search(const NeighborGraph& graph, const U* rows, std::size_t n, std::size_t dim, const T* q,
+                  const std::uint32_t* entries, std::size_t entry_count, std::size_t ef, GraphScratch<T>& s,
+                  QueryStats& stats) {
+  constexpr std::size_t group = sizeof(T) == 4 ? 4 : 2;
+  s.start(n, ef);
+  GraphPool<T>& pool = s.pool;
+  std::uint32_t* const seen = s.seen.data();
+  const std::uint32_t epoch = s.epoch;
+  const std::size_t row_lines = (dim * sizeof(U) + 63) / 64;
+  std::uint64_t scored = 0, expanded = 0;
+
+  // Scores s.fresh and offers each to the pool; returns the first position a point entered at.
+  auto score_fresh = [&] {
+    std::size_t first_entered = pool.size();
+    const std::size_t count = s.fresh.size();
+    const std::uint32_t* todo = s.fresh.data();
+    for (std::size_t first = 0; first < count; first += group) {
+      const U* group_rows[group];
+      for (std::size_t g = 0; g < group; ++g) group_rows[g] = rows + std::size_t{todo[std::min(first + g, count - 1)]} * dim;
+      const T limit = pool.bound();
+      T dist[group];
+      l2_distances_or_more<group>(q, group_rows, dim, limit, dist);
+      for (std::size_t g = 0; g < group && first + g < count; ++g) {
+        if (!(dist[g] <= limit)) continue;  // may be a partial sum: never offered
+        const std::size_t pos = pool.insert(dist[g], todo[first + g]);
+        first_entered = std::min(first_entered, pos);
+      }
+    }
+    scored += count;
+    return first_entered;
+  };
+  auto take = [&](std::uint32_t row) {
+    if (seen[row] == epoch) return;
+    seen[row] = epoch;
+    s.fresh.push_back(row);
+    const char* first_byte = reinterpret_cast<const char*>(rows + std::size_t{row} * dim);
+    for (std::size_t line = 0; line < row_lines; ++line) __builtin_prefetch(first_byte + 64 * line);
+  };
+
+  s.fresh.clear();
+  for (std::size_t i = 0; i < entry_count; ++i) take(entries[i]);
+  score_fresh();
+
+  // Invariant: every point of the pool before `cursor` is expanded.
+  std::size_t cursor = 0;
+  for (;;) {
+    while (cursor < pool.size() && pool.expanded(cursor)) ++cursor;
+    if (cursor == pool.size()) break;
+    pool.expand(cursor);
+    ++expanded;
+    const std::uint32_t u = pool.row(cursor);
+    const std::uint32_t* list = graph.neighbours(u);
+    s.fresh.clear();
+    for (std::size_t i = 0; i < graph.degree; ++i) {
+      const std::uint32_t v = list[i];
+      if (v == u) break;  // the padding: the list ends here
+      take(v);
+    }
+    cursor = std::min(cursor, score_fresh());
+  }
+  stats.points_visited += scored;
+  stats.nodes_visited += expanded;
+}
+
+}  // namespace kdspace::detail
