@@ -1,30 +1,20 @@
-// Audio descriptors for the forest benchmark: MFCC frames (13 cepstral coefficients, their deltas
-// and delta-deltas: 39 values a frame) computed from synthetic audio.
-//
-// The audio: 16 kHz, a sequence of notes (0.08 to 0.6 s) played by 8 "instruments" (harmonic tones
-// whose harmonic amplitudes fall off at different rates, with vibrato and an attack/decay envelope),
-// some notes sounding two at a time, over a noise floor of varying level, with short silences. The
-// features: 25 ms Hamming-windowed frames every 10 ms, 512-point FFT power spectrum, 26 triangular
-// mel filters (0 to 8 kHz), log energies, DCT-II (coefficients 0..12), and regression deltas over
-// +-2 frames, twice.
+// Audio descriptors for the benchmarks: MFCC frames of any audio (mfcc()), by default 13 cepstral
+// coefficients, their deltas and delta-deltas (39 values a frame). audio_files.hpp reads the
+// recordings they are computed from.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <cstddef>
-#include <cstdint>
-#include <random>
 #include <vector>
 
 namespace kdspace_bench {
 
-inline constexpr std::size_t mfcc_dim = 39;
-
 namespace audio_detail {
 
 constexpr double pi = 3.14159265358979323846;
-constexpr double sample_rate = 16000;
-constexpr std::size_t frame_length = 400, hop = 160, fft_size = 512, mel_bands = 26, cepstra = 13;
+constexpr std::size_t mel_bands = 26;
 
 // In-place radix-2 FFT of a power-of-two length.
 inline void fft(std::vector<std::complex<double>>& x) {
@@ -51,84 +41,62 @@ inline void fft(std::vector<std::complex<double>>& x) {
 inline double hz_to_mel(double hz) { return 2595 * std::log10(1 + hz / 700); }
 inline double mel_to_hz(double mel) { return 700 * (std::pow(10, mel / 2595) - 1); }
 
-// Enough synthetic audio for `frames` frames.
-inline std::vector<double> synth_audio(std::size_t frames, std::uint32_t seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> unit(0, 1);
-  std::normal_distribution<double> normal(0, 1);
-  const std::size_t samples = frames * hop + frame_length;
-  std::vector<double> audio(samples, 0.0);
-  // Instruments: the rate at which harmonic amplitudes fall (1/h^rolloff), and the harmonics used.
-  const double rolloff[8] = {0.6, 1.0, 1.5, 2.0, 2.5, 3.0, 1.2, 0.8};
-  const int harmonics[8] = {12, 10, 8, 6, 5, 4, 9, 15};
-  std::size_t at = 0;
-  while (at < samples) {
-    const std::size_t length = static_cast<std::size_t>((0.08 + 0.52 * unit(rng)) * sample_rate);
-    const int voices = unit(rng) < 0.3 ? 2 : 1;
-    const bool silence = unit(rng) < 0.1;
-    for (int v = 0; v < voices && !silence; ++v) {
-      const int instrument = static_cast<int>(rng() % 8);
-      const double midi = 40 + std::floor(44 * unit(rng));
-      const double f0 = 440 * std::pow(2, (midi - 69) / 12);
-      const double gain = 0.2 + 0.8 * unit(rng);
-      const double vibrato = 0.004 * unit(rng);
-      for (std::size_t s = 0; s < length && at + s < samples; ++s) {
-        const double t = static_cast<double>(s) / sample_rate;
-        const double envelope = std::min(1.0, t / 0.01) * std::exp(-t * (1 + 0.5 * instrument));
-        const double phase = 2 * pi * f0 * (t + vibrato * std::sin(2 * pi * 5 * t) / (2 * pi * 5));
-        double value = 0;
-        for (int h = 1; h <= harmonics[instrument] && f0 * h < 7900; ++h)
-          value += std::sin(h * phase) / std::pow(static_cast<double>(h), rolloff[instrument]);
-        audio[at + s] += gain * envelope * value;
-      }
-    }
-    const double noise = std::pow(10, -3 + 2 * unit(rng));
-    double smooth = 0;
-    for (std::size_t s = 0; s < length && at + s < samples; ++s) {
-      smooth = 0.7 * smooth + 0.3 * normal(rng);  // a little low-passed: more energy low
-      audio[at + s] += noise * smooth;
-    }
-    at += length;
-  }
-  return audio;
-}
-
 }  // namespace audio_detail
 
-/// `frames` MFCC frames (39 floats each, row-major) of synthetic audio drawn with `seed`.
-inline std::vector<float> mfcc_frames(std::size_t frames, std::uint32_t seed) {
+/// What mfcc() computes a frame: `cepstra` coefficients (0 .. cepstra - 1), and with `deltas` their
+/// regression deltas and delta-deltas (3 * cepstra values a frame).
+struct MfccShape {
+  std::size_t cepstra = 13;
+  bool deltas = true;
+  std::size_t dim() const { return deltas ? 3 * cepstra : cepstra; }
+};
+
+/// MFCC frames of `audio` (mono, at `rate` samples a second), row-major, shape.dim() floats each:
+/// 25 ms Hamming-windowed frames every 10 ms, the power spectrum (FFT of the next power of two at
+/// least a frame long), 26 triangular mel filters from 0 Hz to min(rate / 2, 8 kHz), log energies,
+/// DCT-II. Every frame whose window and delta-deltas fit inside the audio: 4 frames are lost at each
+/// end to the deltas.
+inline std::vector<float> mfcc(const std::vector<double>& audio, double rate, const MfccShape& shape) {
   using namespace audio_detail;
-  const std::size_t pad = 4;  // frames each side, so that every output frame has full delta-deltas
-  const std::size_t total = frames + 2 * pad;
-  const std::vector<double> audio = synth_audio(total, seed);
+  const std::size_t frame_length = static_cast<std::size_t>(0.025 * rate), step = static_cast<std::size_t>(0.010 * rate);
+  std::size_t fft_length = 1;
+  while (fft_length < frame_length) fft_length *= 2;
+  if (audio.size() < frame_length) return {};
+  const std::size_t total = (audio.size() - frame_length) / step + 1;
+  const std::size_t pad = shape.deltas ? 4 : 0;  // frames each side that lack full delta-deltas
+  if (total <= 2 * pad) return {};
+  const std::size_t cepstra = shape.cepstra;
 
   // Mel filterbank on the FFT bins.
-  const std::size_t bins = fft_size / 2 + 1;
+  const double top = std::min(rate / 2, 8000.0);
+  const std::size_t bins = fft_length / 2 + 1;
   std::vector<double> edges(mel_bands + 2);
   for (std::size_t i = 0; i < edges.size(); ++i)
-    edges[i] = mel_to_hz(hz_to_mel(sample_rate / 2) * static_cast<double>(i) / static_cast<double>(mel_bands + 1));
+    edges[i] = mel_to_hz(hz_to_mel(top) * static_cast<double>(i) / static_cast<double>(mel_bands + 1));
   std::vector<double> filters(mel_bands * bins, 0.0);
+  std::vector<std::size_t> first_bin(mel_bands, bins), last_bin(mel_bands, 0);  // each filter's nonzero bins
   for (std::size_t b = 0; b < mel_bands; ++b)
     for (std::size_t j = 0; j < bins; ++j) {
-      const double hz = static_cast<double>(j) * sample_rate / static_cast<double>(fft_size);
+      const double hz = static_cast<double>(j) * rate / static_cast<double>(fft_length);
       const double rise = (hz - edges[b]) / (edges[b + 1] - edges[b]);
       const double fall = (edges[b + 2] - hz) / (edges[b + 2] - edges[b + 1]);
       filters[b * bins + j] = std::max(0.0, std::min(rise, fall));
+      if (filters[b * bins + j] > 0) first_bin[b] = std::min(first_bin[b], j), last_bin[b] = j + 1;
     }
 
   std::vector<double> cepstrum(total * cepstra);
-  std::vector<std::complex<double>> spectrum(fft_size);
+  std::vector<std::complex<double>> spectrum(fft_length);
   std::vector<double> log_energy(mel_bands);
   for (std::size_t f = 0; f < total; ++f) {
     std::fill(spectrum.begin(), spectrum.end(), 0.0);
     for (std::size_t s = 0; s < frame_length; ++s) {
-      const double window = 0.54 - 0.46 * std::cos(2 * pi * static_cast<double>(s) / (frame_length - 1));
-      spectrum[s] = window * audio[f * hop + s];
+      const double window = 0.54 - 0.46 * std::cos(2 * pi * static_cast<double>(s) / static_cast<double>(frame_length - 1));
+      spectrum[s] = window * audio[f * step + s];
     }
     fft(spectrum);
     for (std::size_t b = 0; b < mel_bands; ++b) {
       double e = 0;
-      for (std::size_t j = 0; j < bins; ++j) e += filters[b * bins + j] * std::norm(spectrum[j]);
+      for (std::size_t j = first_bin[b]; j < last_bin[b]; ++j) e += filters[b * bins + j] * std::norm(spectrum[j]);
       log_energy[b] = std::log(e + 1e-10);
     }
     for (std::size_t c = 0; c < cepstra; ++c) {
@@ -148,13 +116,16 @@ inline std::vector<float> mfcc_frames(std::size_t frames, std::uint32_t seed) {
                                 2 * (in[(f + 2) * cepstra + c] - in[(f - 2) * cepstra + c])) / 10;
     return out;
   };
-  const std::vector<double> delta = deltas(cepstrum), delta2 = deltas(delta);
-  std::vector<float> out(frames * mfcc_dim);
+  const std::size_t frames = total - 2 * pad, dim = shape.dim();
+  std::vector<float> out(frames * dim);
+  const std::vector<double> delta = shape.deltas ? deltas(cepstrum) : std::vector<double>{};
+  const std::vector<double> delta2 = shape.deltas ? deltas(delta) : std::vector<double>{};
   for (std::size_t f = 0; f < frames; ++f)
     for (std::size_t c = 0; c < cepstra; ++c) {
-      out[f * mfcc_dim + c] = static_cast<float>(cepstrum[(f + pad) * cepstra + c]);
-      out[f * mfcc_dim + cepstra + c] = static_cast<float>(delta[(f + pad) * cepstra + c]);
-      out[f * mfcc_dim + 2 * cepstra + c] = static_cast<float>(delta2[(f + pad) * cepstra + c]);
+      out[f * dim + c] = static_cast<float>(cepstrum[(f + pad) * cepstra + c]);
+      if (!shape.deltas) continue;
+      out[f * dim + cepstra + c] = static_cast<float>(delta[(f + pad) * cepstra + c]);
+      out[f * dim + 2 * cepstra + c] = static_cast<float>(delta2[(f + pad) * cepstra + c]);
     }
   return out;
 }
