@@ -3,7 +3,7 @@
 //
 //   kdspace graph    PointForest (4 trees and the neighbour graph, degree 32), searched by its graph;
 //                    setting: ef
-//   kdspace forest   the same index searched by its trees; settings: trees 1 or 4, checks
+//   kdspace forest   PointForest without the graph (the same 4 trees); settings: trees 1 or 4, checks
 //   hnswlib          HierarchicalNSW, M 16, efConstruction 200, built by parallel addPoint calls (as its
 //                    Python binding does); setting: ef
 //   faiss HNSW       IndexHNSWFlat, M 16, efConstruction 200; setting: efSearch
@@ -50,6 +50,25 @@ inline double thread_cpu_seconds() {
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
   return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
+
+/// Seconds of CPU time of the whole process (all its threads).
+inline double process_cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+/// Times a build: wall seconds, or with g_cpu_time the CPU seconds of all the process's threads
+/// (their sum: what one thread would take if the build divided its work perfectly).
+class BuildTimer {
+ public:
+  BuildTimer() : wall_(Clock::now()), cpu_(process_cpu_seconds()) {}
+  double seconds() const { return g_cpu_time ? process_cpu_seconds() - cpu_ : seconds_since(wall_); }
+
+ private:
+  Clock::time_point wall_;
+  double cpu_;
+};
 
 /// Times one batch: wall seconds, or with g_cpu_time and one thread, CPU seconds of this thread.
 class BatchTimer {
@@ -107,23 +126,12 @@ void for_queries(std::size_t nq, unsigned threads, Body&& body) {
 
 // ---- kdspace --------------------------------------------------------------------------------------------
 
-/// The index both kdspace contenders search (built once, by the graph contender).
-struct KdspaceIndex {
-  std::unique_ptr<kdspace::PointForest<float>> forest;
-  double build_s = 0;
-};
-
+/// kdspace's index with its graph (the default from dimension 8 on), searched by the graph.
 class KdspaceGraph : public Contender {
  public:
-  explicit KdspaceGraph(std::shared_ptr<KdspaceIndex> index) : index_(std::move(index)) { name = "kdspace graph"; }
-  void build(const AnnData& d, unsigned threads) override {
-    kdspace::ForestParams params;
-    params.threads = threads;
-    params.graph = kdspace::GraphMode::on;
-    const auto start = Clock::now();
-    index_->forest = std::make_unique<kdspace::PointForest<float>>(d.base.data(), d.n(), d.dim, params);
-    build_s = index_->build_s = seconds_since(start);
-  }
+  KdspaceGraph() { name = "kdspace graph"; }
+  void build(const AnnData& d, unsigned threads) override { make(d, threads, kdspace::GraphMode::on); }
+  const kdspace::PointForest<float>& index() const { return *forest_; }
   std::vector<AnnSetting> settings() const override {
     std::vector<AnnSetting> out;
     for (std::size_t ef : {10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 64, 80, 96, 128, 192, 256, 384, 512})
@@ -133,27 +141,33 @@ class KdspaceGraph : public Contender {
   double search(const AnnData& d, const AnnSetting& s, unsigned threads, std::vector<std::uint32_t>& ids) override {
     return run(d, kdspace::ForestSearchParams{kdspace::unlimited_checks, 0, s.a}, threads, ids);
   }
-  std::size_t memory_bytes() const override { return index_->forest->memory_bytes(); }
+  std::size_t memory_bytes() const override { return forest_->memory_bytes(); }
 
  protected:
+  void make(const AnnData& d, unsigned threads, kdspace::GraphMode graph) {
+    kdspace::ForestParams params;
+    params.threads = threads;
+    params.graph = graph;
+    const BuildTimer timer;
+    forest_ = std::make_unique<kdspace::PointForest<float>>(d.base.data(), d.n(), d.dim, params);
+    build_s = timer.seconds();
+  }
   double run(const AnnData& d, const kdspace::ForestSearchParams& p, unsigned threads, std::vector<std::uint32_t>& ids) {
     const BatchTimer timer(threads);
-    const auto found = index_->forest->knn_batch(d.queries.data(), d.nq(), ann_k, p, threads);
+    const auto found = forest_->knn_batch(d.queries.data(), d.nq(), ann_k, p, threads);
     const double s = timer.seconds();
     ids.resize(found.neighbors.size());
     for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = found.neighbors[i].index;
     return s;
   }
-  std::shared_ptr<KdspaceIndex> index_;
+  std::unique_ptr<kdspace::PointForest<float>> forest_;
 };
 
+/// kdspace's index without its graph (the same trees), searched by the trees.
 class KdspaceForest : public KdspaceGraph {
  public:
-  explicit KdspaceForest(std::shared_ptr<KdspaceIndex> index) : KdspaceGraph(std::move(index)) { name = "kdspace forest"; }
-  /// The index is built by KdspaceGraph (which must come first); build_s is the trees' share of it.
-  void build(const AnnData&, unsigned) override {
-    build_s = index_->build_s - index_->forest->graph_build_seconds();  // the trees alone
-  }
+  KdspaceForest() { name = "kdspace forest"; }
+  void build(const AnnData& d, unsigned threads) override { make(d, threads, kdspace::GraphMode::off); }
   std::vector<AnnSetting> settings() const override {
     std::vector<AnnSetting> out;
     for (std::size_t trees : {1, 4})
@@ -164,9 +178,6 @@ class KdspaceForest : public KdspaceGraph {
   double search(const AnnData& d, const AnnSetting& s, unsigned threads, std::vector<std::uint32_t>& ids) override {
     return run(d, kdspace::ForestSearchParams{s.b, s.a, 0}, threads, ids);
   }
-  std::size_t memory_bytes() const override {
-    return index_->forest->memory_bytes() - index_->forest->graph_degree() * index_->forest->size() * 4;
-  }
 };
 
 // ---- hnswlib ---------------------------------------------------------------------------------------------
@@ -176,7 +187,7 @@ class Hnswlib : public Contender {
   Hnswlib() { name = "hnswlib"; }
   void build(const AnnData& d, unsigned threads) override {
     space_ = std::make_unique<hnswlib::L2Space>(d.dim);
-    const auto start = Clock::now();
+    const BuildTimer timer;
     index_ = std::make_unique<hnswlib::HierarchicalNSW<float>>(space_.get(), d.n(), 16, 200, 100);
     index_->addPoint(d.base.data(), 0);  // the first point alone, as its Python binding does
     std::atomic<std::size_t> next{1};
@@ -187,7 +198,7 @@ class Hnswlib : public Contender {
     for (unsigned t = 1; t < threads; ++t) pool.emplace_back(run);
     run();
     for (auto& t : pool) t.join();
-    build_s = seconds_since(start);
+    build_s = timer.seconds();
   }
   std::vector<AnnSetting> settings() const override {
     std::vector<AnnSetting> out;
@@ -240,11 +251,11 @@ class FaissHnsw : public Contender {
   FaissHnsw() { name = "faiss HNSW"; }
   void build(const AnnData& d, unsigned threads) override {
     omp_set_num_threads(static_cast<int>(threads));
-    const auto start = Clock::now();
+    const BuildTimer timer;
     index_ = std::make_unique<faiss::IndexHNSWFlat>(static_cast<int>(d.dim), 16);
     index_->hnsw.efConstruction = 200;
     index_->add(static_cast<faiss::Index::idx_t>(d.n()), d.base.data());
-    build_s = seconds_since(start);
+    build_s = timer.seconds();
   }
   std::vector<AnnSetting> settings() const override {
     std::vector<AnnSetting> out;
@@ -273,13 +284,13 @@ class FaissIvf : public Contender {
   void build(const AnnData& d, unsigned threads) override {
     omp_set_num_threads(static_cast<int>(threads));
     lists_ = std::max<std::size_t>(1, static_cast<std::size_t>(4 * std::sqrt(static_cast<double>(d.n()))));
-    const auto start = Clock::now();
+    const BuildTimer timer;
     quantizer_ = std::make_unique<faiss::IndexFlatL2>(static_cast<int>(d.dim));
     index_ = std::make_unique<faiss::IndexIVFFlat>(quantizer_.get(), d.dim, lists_);
     index_->cp.seed = 1234;
     index_->train(static_cast<faiss::Index::idx_t>(d.n()), d.base.data());
     index_->add(static_cast<faiss::Index::idx_t>(d.n()), d.base.data());
-    build_s = seconds_since(start);
+    build_s = timer.seconds();
   }
   std::vector<AnnSetting> settings() const override {
     std::vector<AnnSetting> out;
@@ -310,10 +321,10 @@ class Flann : public Contender {
   Flann() { name = "FLANN"; }
   void build(const AnnData& d, unsigned) override {
     flann::Matrix<float> data(const_cast<float*>(d.base.data()), d.n(), d.dim);
-    const auto start = Clock::now();
+    const BuildTimer timer;
     index_ = std::make_unique<Index>(data, flann::KDTreeIndexParams(4));
     index_->buildIndex();
-    build_s = seconds_since(start);
+    build_s = timer.seconds();
     points_bytes_ = d.base.size() * sizeof(float);
   }
   std::vector<AnnSetting> settings() const override {

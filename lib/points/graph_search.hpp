@@ -9,8 +9,9 @@
 // Approximate Nearest Neighbor Search With The Navigating Spreading-out Graph", 2019, Alg. 1).
 //
 // What it costs is mostly waiting for rows: the rows of a list's new points are asked for
-// (prefetched) together as soon as the list is read, and scored four at a time (row_distances.hpp:
-// the same bits as internal_distance()), so every distance in the pool is exact.
+// (prefetched) together as soon as the list is read, and scored a few at a time by a scorer: at
+// query time RowScorer (row_distances.hpp: the same bits as internal_distance(), so every distance
+// in the pool is exact); while the graph is built, ByteRowScorer for byte rows (exact integers).
 #pragma once
 
 #include <algorithm>
@@ -83,20 +84,87 @@ struct GraphScratch {
   }
 };
 
-/// Best-first search of `graph` over `rows` (n rows of `dim` values of U: T, or bytes) for the query
-/// q, from `entries` (rows; repeats are skipped), keeping the ef best: on return s.pool holds them
-/// in (distance, row) order with exact internal distances. Adds to stats.points_visited (points
-/// scored) and stats.nodes_visited (lists read).
+/// Scores rows of U (T, or bytes) against a query of T with the exact kernel: each distance is
+/// internal_distance()'s, bit for bit, or, when above the limit, some value above it.
 template <class T, class U>
-void graph_search(const NeighborGraph& graph, const U* rows, std::size_t n, std::size_t dim, const T* q,
-                  const std::uint32_t* entries, std::size_t entry_count, std::size_t ef, GraphScratch<T>& s,
-                  QueryStats& stats) {
-  constexpr std::size_t group = sizeof(T) == 4 ? 4 : 2;
+class RowScorer {
+ public:
+  using Scalar = T;
+  static constexpr std::size_t group = sizeof(T) == 4 ? 4 : 2;
+
+  RowScorer(const U* rows, std::size_t dim, const T* q)
+      : rows_(rows), dim_(dim), q_(q), lines_((dim * sizeof(U) + 63) / 64) {}
+  void prefetch(std::uint32_t row) const {
+    const char* first_byte = reinterpret_cast<const char*>(rows_ + std::size_t{row} * dim_);
+    for (std::size_t line = 0; line < lines_; ++line) __builtin_prefetch(first_byte + 64 * line);
+  }
+  /// Distances of the `group` rows ids[0, group).
+  void operator()(const std::uint32_t* ids, T limit, T* out) const {
+    const U* group_rows[group];
+    for (std::size_t g = 0; g < group; ++g) group_rows[g] = rows_ + std::size_t{ids[g]} * dim_;
+    l2_distances_or_more<group>(q_, group_rows, dim_, limit, out);
+  }
+
+ private:
+  const U* rows_;
+  std::size_t dim_;
+  const T* q_;
+  std::size_t lines_;
+};
+
+/// Scores byte rows against a byte query (given widened to 16 bits), exactly, in integers
+/// (l2_byte_distances); the distances are then converted to T.
+template <class T>
+class ByteRowScorer {
+ public:
+  using Scalar = T;
+  static constexpr std::size_t group = 4;
+
+  ByteRowScorer(const std::uint8_t* rows, std::size_t dim, const std::int16_t* q)
+      : rows_(rows), dim_(dim), q_(q), lines_((dim + 63) / 64) {}
+  void prefetch(std::uint32_t row) const {
+    const char* first_byte = reinterpret_cast<const char*>(rows_ + std::size_t{row} * dim_);
+    for (std::size_t line = 0; line < lines_; ++line) __builtin_prefetch(first_byte + 64 * line);
+  }
+  void operator()(const std::uint32_t* ids, T, T* out) const {
+    const std::uint8_t* group_rows[group];
+    for (std::size_t g = 0; g < group; ++g) group_rows[g] = rows_ + std::size_t{ids[g]} * dim_;
+    std::uint32_t dist[group];
+    l2_byte_distances<group>(q_, group_rows, dim_, dist);
+    for (std::size_t g = 0; g < group; ++g) out[g] = static_cast<T>(dist[g]);
+  }
+
+ private:
+  const std::uint8_t* rows_;
+  std::size_t dim_;
+  const std::int16_t* q_;
+  std::size_t lines_;
+};
+
+/// Where a graph search starts: rows to score, and rows whose distances are known already (distinct,
+/// and not among the rows to score); `seen` rows are left out of the search altogether.
+template <class T>
+struct GraphEntries {
+  const std::uint32_t* rows = nullptr;
+  std::size_t row_count = 0;
+  const Candidate<T>* known = nullptr;
+  std::size_t known_count = 0;
+  const std::uint32_t* seen = nullptr;
+  std::size_t seen_count = 0;
+};
+
+/// Best-first search of `graph` (over n rows) for the query that `score` scores rows against, from
+/// `entries`, keeping the ef best: on return s.pool holds them in (distance, row) order, with the
+/// scorer's distances. Adds to stats.points_visited (points scored) and stats.nodes_visited (lists
+/// read).
+template <class T, class Scorer>
+void graph_search(const NeighborGraph& graph, std::size_t n, const Scorer& score, const GraphEntries<T>& entries,
+                  std::size_t ef, GraphScratch<T>& s, QueryStats& stats) {
+  constexpr std::size_t group = Scorer::group;
   s.start(n, ef);
   GraphPool<T>& pool = s.pool;
   std::uint32_t* const seen = s.seen.data();
   const std::uint32_t epoch = s.epoch;
-  const std::size_t row_lines = (dim * sizeof(U) + 63) / 64;
   std::uint64_t scored = 0, expanded = 0;
 
   // Scores s.fresh and offers each to the pool; returns the first position a point entered at.
@@ -105,14 +173,14 @@ void graph_search(const NeighborGraph& graph, const U* rows, std::size_t n, std:
     const std::size_t count = s.fresh.size();
     const std::uint32_t* todo = s.fresh.data();
     for (std::size_t first = 0; first < count; first += group) {
-      const U* group_rows[group];
-      for (std::size_t g = 0; g < group; ++g) group_rows[g] = rows + std::size_t{todo[std::min(first + g, count - 1)]} * dim;
+      std::uint32_t ids[group];
+      for (std::size_t g = 0; g < group; ++g) ids[g] = todo[std::min(first + g, count - 1)];
       const T limit = pool.bound();
       T dist[group];
-      l2_distances_or_more<group>(q, group_rows, dim, limit, dist);
+      score(ids, limit, dist);
       for (std::size_t g = 0; g < group && first + g < count; ++g) {
         if (!(dist[g] <= limit)) continue;  // may be a partial sum: never offered
-        const std::size_t pos = pool.insert(dist[g], todo[first + g]);
+        const std::size_t pos = pool.insert(dist[g], ids[g]);
         first_entered = std::min(first_entered, pos);
       }
     }
@@ -123,12 +191,16 @@ void graph_search(const NeighborGraph& graph, const U* rows, std::size_t n, std:
     if (seen[row] == epoch) return;
     seen[row] = epoch;
     s.fresh.push_back(row);
-    const char* first_byte = reinterpret_cast<const char*>(rows + std::size_t{row} * dim);
-    for (std::size_t line = 0; line < row_lines; ++line) __builtin_prefetch(first_byte + 64 * line);
+    score.prefetch(row);
   };
 
+  for (std::size_t i = 0; i < entries.seen_count; ++i) seen[entries.seen[i]] = epoch;
+  for (std::size_t i = 0; i < entries.known_count; ++i) {
+    seen[entries.known[i].index] = epoch;
+    pool.insert(entries.known[i].dist, entries.known[i].index);
+  }
   s.fresh.clear();
-  for (std::size_t i = 0; i < entry_count; ++i) take(entries[i]);
+  for (std::size_t i = 0; i < entries.row_count; ++i) take(entries.rows[i]);
   score_fresh();
 
   // Invariant: every point of the pool before `cursor` is expanded.

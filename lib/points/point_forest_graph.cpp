@@ -69,7 +69,10 @@ void PointForest<T>::search_graph(const U* points, const T* q, std::size_t k, st
   std::vector<std::uint32_t>& entries = s.arriving;  // not in use outside the trees' search
   entries.resize(count);
   for (std::uint32_t i = 0; i < count; ++i) entries[i] = first + i;
-  detail::graph_search(graph_, points, size(), dim_, q, entries.data(), count, std::max(ef, k), s.graph, stats);
+  detail::GraphEntries<T> start;
+  start.rows = entries.data();
+  start.row_count = count;
+  detail::graph_search(graph_, size(), detail::RowScorer<T, U>(points, dim_, q), start, std::max(ef, k), s.graph, stats);
   const detail::GraphPool<T>& pool = s.graph.pool;
   if (pool.size() < k) {
     // The graph led to fewer than k points (a graph in pieces, on tiny or degenerate data): the

@@ -111,6 +111,44 @@ void l2_distances_or_more(const float* a, const U* const* b, std::size_t dim, fl
 }  // namespace sse2
 #endif
 
+/// Squared L2 distances from a byte query (given widened to 16 bits, `a`) to R byte rows b[r], exactly,
+/// as integers (each below 2^31 for dim < 33000). With SSE2, 16 coordinates of a row take one load,
+/// two unpacks, two subtractions and two multiply-adds (_mm_madd_epi16 squares and pairs the 16-bit
+/// differences): about 2.5 times fewer instructions than the byte-to-float kernel below.
+template <std::size_t R>
+void l2_byte_distances(const std::int16_t* a, const std::uint8_t* const* b, std::size_t dim, std::uint32_t* out) {
+  std::size_t done = 0;
+#if defined(__SSE2__)
+  const std::size_t blocks = dim / 16;
+  __m128i acc[R];
+  for (std::size_t r = 0; r < R; ++r) acc[r] = _mm_setzero_si128();
+  const __m128i zero = _mm_setzero_si128();
+  for (std::size_t block = 0; block < blocks; ++block) {
+    const __m128i a_low = _mm_loadu_si128(reinterpret_cast<const __m128i*>(a + 16 * block));
+    const __m128i a_high = _mm_loadu_si128(reinterpret_cast<const __m128i*>(a + 16 * block + 8));
+    for (std::size_t r = 0; r < R; ++r) {
+      const __m128i bytes = _mm_loadu_si128(reinterpret_cast<const __m128i*>(b[r] + 16 * block));
+      const __m128i d_low = _mm_sub_epi16(a_low, _mm_unpacklo_epi8(bytes, zero));
+      const __m128i d_high = _mm_sub_epi16(a_high, _mm_unpackhi_epi8(bytes, zero));
+      acc[r] = _mm_add_epi32(acc[r], _mm_add_epi32(_mm_madd_epi16(d_low, d_low), _mm_madd_epi16(d_high, d_high)));
+    }
+  }
+  for (std::size_t r = 0; r < R; ++r) {
+    alignas(16) std::uint32_t lanes[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(lanes), acc[r]);
+    out[r] = lanes[0] + lanes[1] + lanes[2] + lanes[3];
+  }
+  done = blocks * 16;
+#else
+  for (std::size_t r = 0; r < R; ++r) out[r] = 0;
+#endif
+  for (std::size_t i = done; i < dim; ++i)
+    for (std::size_t r = 0; r < R; ++r) {
+      const int diff = a[i] - static_cast<int>(b[r][i]);
+      out[r] += static_cast<std::uint32_t>(diff * diff);
+    }
+}
+
 /// For each of R rows b[r] (of T, or of bytes), internal_distance<L2>(a, b[r], dim) bit for bit, or,
 /// once every row is sure to be farther than `limit`, some values above `limit` for all of them.
 template <std::size_t R, class T, class U>
