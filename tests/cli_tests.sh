@@ -115,6 +115,11 @@ write_fvecs("query.fvecs", query)
 write_bvecs("base.bvecs", base)
 write_csv("query4.csv", [[1, 2, 3, 4], [5, 6, 7, 8]])
 write_csv("query_neg.csv", [[1, 2, 3], [3, 3, -1]])  # row 2 lies outside a periodic box [0, L)
+# 16-D, for the neighbour graph (built from dimension 8 on).
+wide = [[rng.randint(0, 9) for _ in range(16)] for _ in range(300)]
+write_csv("wide.csv", wide)
+write_bvecs("wide.bvecs", wide)
+write_csv("wide_query.csv", [[rng.randint(0, 9) for _ in range(16)] for _ in range(12)])
 
 # Radius: two tight groups far apart and a few points between, so rows differ in length.
 cl = [[0, 0], [1, 0], [0, 1], [1, 1], [2, 2], [10, 10], [11, 10], [20, 0], [30, 30], [31, 31]]
@@ -156,6 +161,14 @@ expect_error "--recall with --checks" 2 "exclude each other" -- knn --base base.
 expect_error "--forest with --eps" 2 "--eps" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --eps 0.5
 expect_error "--forest with --metric l1" 2 "l2 only" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --metric l1
 expect_error "--forest with --axis" 2 "--axis" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --axis cycle
+expect_error "--ef without --graph" 2 "--ef needs --graph" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --ef 10
+expect_error "--ef with --forest" 2 "--ef needs --graph" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --ef 10
+expect_error "--forest with --graph" 2 "exclude each other" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --graph
+expect_error "--recall with --ef" 2 "exclude each other" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --recall 0.9 --graph --ef 9
+expect_error "--degree 1" 2 "--degree" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --graph --degree 1
+expect_error "--degree with --forest" 2 "--degree applies to the graph" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --forest 2 --degree 8
+expect_error "--degree alone" 2 "--degree needs --graph or --recall" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --degree 8
+expect_error "--graph with --eps" 2 "--eps" -- knn --base base.csv --query query.csv -k 3 --out ids.ivecs --graph --eps 0.5
 expect_error "negative radius" 2 "-r" -- radius --base base.csv --query query.csv -r -0.5 --out ids.ivecs
 expect_error "NaN radius" 2 "-r" -- radius --base base.csv --query query.csv -r nan --out ids.ivecs
 expect_error "unknown command" 2 "frobnicate" -- frobnicate
@@ -256,6 +269,15 @@ if expect_ok "knn --forest --stats on a bvecs base" knn --base base.bvecs --quer
   if grep -qF '"stored_as": "bytes"' out.txt; then pass "a bvecs base is stored as bytes"
   else fail "a bvecs base is stored as bytes" "stdout: $(head -c 400 out.txt)"; fi
 fi
+# The graph: with a pool as large as the data the answer is exact (from the trees); on a bvecs base too.
+if expect_ok "knn --graph, ef = n" knn --base wide.csv --query wide_query.csv -k 5 --out ids.ivecs --distances dist.fvecs \
+  --graph --ef 300 --threads 2; then
+  check_results "knn --graph with ef = n equals brute force" knn l2 5 wide.csv wide_query.csv
+fi
+if expect_ok "knn --graph on a bvecs base, ef = n" knn --base wide.bvecs --query wide_query.csv -k 4 --out ids.ivecs \
+  --distances dist.fvecs --graph --ef 300 --degree 8; then
+  check_results "knn --graph on a bvecs base equals brute force" knn l2 4 wide.csv wide_query.csv
+fi
 expect_error "knn --forest on a truncated bvecs base" 1 "trunc.bvecs: row 4: truncated" -- \
   knn --base trunc.bvecs --query query.csv -k 3 --out ids.ivecs --forest 2
 if expect_ok "radius" radius --base cluster.csv --query cluster_query.csv -r 1.5 --out ids.ivecs --distances dist.fvecs; then
@@ -294,7 +316,18 @@ if expect_ok "knn --forest --stats" knn --base base.csv --query query.csv -k 3 -
 fi
 if expect_ok "knn --recall --stats" knn --base base.csv --query query.csv -k 3 --out ids.ivecs --recall 0.9 --stats; then
   check_stats "knn --recall --stats is JSON with the tuning keys" \
-    "$common_keys k trees checks recall target_recall tune_s tuning_recall validation_recall"
+    "$common_keys k method trees checks recall target_recall tune_s tuning_recall validation_recall"
+fi
+if expect_ok "knn --graph --stats" knn --base wide.csv --query wide_query.csv -k 3 --out ids.ivecs --graph --ef 8 --stats; then
+  check_stats "knn --graph --stats is JSON with the graph's keys" \
+    "$common_keys k method ef graph_degree graph_build_s recall recall_queries"
+  if grep -qF '"method": "graph"' out.txt; then pass "knn --graph --stats says method graph"
+  else fail "knn --graph --stats says method graph" "stdout: $(head -c 400 out.txt)"; fi
+fi
+if expect_ok "knn --recall on 16-D data --stats" knn --base wide.csv --query wide_query.csv -k 3 --out ids.ivecs --recall 0.95 \
+  --stats; then
+  check_stats "knn --recall --stats on 16-D data is JSON with the tuning keys" \
+    "$common_keys k method graph_degree graph_build_s recall target_recall tune_s tuning_recall validation_recall"
 fi
 if expect_ok "radius --stats" radius --base cluster.csv --query cluster_query.csv -r 2 --out ids.ivecs --stats; then
   check_stats "radius --stats is JSON with the required keys" "$common_keys radius"

@@ -43,7 +43,8 @@ struct PointForest<T>::Scratch {
     }
   };
 
-  std::vector<double> query;     // projected query
+  std::vector<double> query;     // projected query, along axis a when query_epoch[a] == epoch
+  std::vector<std::uint32_t> query_epoch;
   std::vector<double> terms;     // per projected axis, its term in the current cell's bound
   std::vector<std::uint8_t> set;  // per projected axis: its term was set by enter()
   std::vector<std::uint32_t> touched;
@@ -54,15 +55,14 @@ struct PointForest<T>::Scratch {
   std::uint32_t epoch = 0;
   std::vector<detail::Candidate<T>> results;
   detail::GraphScratch<T> graph;
-  // The projected query along the axes the descent to the entry leaf needed (computed on demand):
-  // axis a's value is entry_query[a] when entry_epoch_of[a] == entry_epoch.
-  std::vector<double> entry_query;
-  std::vector<std::uint32_t> entry_epoch_of;
-  std::uint32_t entry_epoch = 0;
 
   void start(std::size_t n, std::size_t m) {
-    if (stamp.size() != n) stamp.assign(n, 0), epoch = 0;
-    if (++epoch == 0) std::fill(stamp.begin(), stamp.end(), 0u), epoch = 1;
+    if (stamp.size() != n || query_epoch.size() != m) stamp.assign(n, 0), query_epoch.assign(m, 0), epoch = 0;
+    if (++epoch == 0) {
+      std::fill(stamp.begin(), stamp.end(), 0u);
+      std::fill(query_epoch.begin(), query_epoch.end(), 0u);
+      epoch = 1;
+    }
     query.resize(m);
     terms.assign(m, 0.0);
     set.assign(m, 0);
@@ -70,6 +70,25 @@ struct PointForest<T>::Scratch {
     trail.clear();
     arriving.clear();
     ready.clear();
+  }
+
+  /// The query's projected coordinate along `axis` (in double), computed the first time a search
+  /// needs it: a search with a small budget reads few of the axes.
+  double projected(const T* q, std::uint32_t axis, const std::vector<double>& mean, const std::vector<double>& directions,
+                   bool pca) {
+    if (query_epoch[axis] != epoch) {
+      const std::size_t dim = mean.size();
+      double v = 0;
+      if (pca) {
+        const double* direction = directions.data() + std::size_t{axis} * dim;
+        for (std::size_t a = 0; a < dim; ++a) v += (static_cast<double>(q[a]) - mean[a]) * direction[a];
+      } else {
+        v = static_cast<double>(q[axis]) - mean[axis];
+      }
+      query[axis] = v;
+      query_epoch[axis] = epoch;
+    }
+    return query[axis];
   }
 
   // Sets `terms` to those of the cell whose trail starts at `t`; `touched` lists the axes set.

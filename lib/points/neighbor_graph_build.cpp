@@ -121,7 +121,9 @@ class GraphBuilder {
   NeighborGraph build(const std::vector<const std::uint32_t*>& tree_orders) {
     score_windows(tree_orders);
     search_each_point();
-    return prune_and_reverse();
+    NeighborGraph graph = prune_and_reverse();
+    connect(graph);
+    return graph;
   }
 
  private:
@@ -323,6 +325,38 @@ class GraphBuilder {
       }
     });
     return graph;
+  }
+
+  // Step 4: one graph. Points of clusters far apart may have no edge between them, and a search
+  // could then never leave the cluster it started in. The rows follow the first tree's leaf order,
+  // in which consecutive rows are near each other (across a cell boundary at worst): walking that
+  // order with a union-find of the graph's edges (each taken both ways), rows r and r + 1 in
+  // different components get an edge each way (Kruskal's rule on that path), so c components are
+  // joined by c - 1 pairs of edges. A full list gives up its farthest neighbour for one.
+  void connect(NeighborGraph& graph) const {
+    std::vector<std::uint32_t> parent(n_);
+    for (std::size_t r = 0; r < n_; ++r) parent[r] = static_cast<std::uint32_t>(r);
+    auto root = [&](std::uint32_t r) {
+      while (parent[r] != r) r = parent[r] = parent[parent[r]];
+      return r;
+    };
+    auto join = [&](std::uint32_t a, std::uint32_t b) {
+      a = root(a), b = root(b);
+      if (a == b) return false;
+      parent[std::max(a, b)] = std::min(a, b);
+      return true;
+    };
+    const std::size_t degree = graph.degree;
+    for (std::size_t r = 0; r < n_; ++r)
+      for (std::size_t i = 0; i < degree; ++i) join(static_cast<std::uint32_t>(r), graph.links[r * degree + i]);
+    auto add = [&](std::uint32_t from, std::uint32_t to) {
+      std::uint32_t* list = graph.links.data() + std::size_t{from} * degree;
+      std::size_t slot = 0;
+      while (slot < degree && list[slot] != from) ++slot;  // the first padding slot
+      list[std::min(slot, degree - 1)] = to;
+    };
+    for (std::uint32_t r = 0; r + 1 < n_; ++r)
+      if (join(r, r + 1)) add(r, r + 1), add(r + 1, r);
   }
 
   const U* rows_;

@@ -226,10 +226,10 @@ void PointForest<T>::build(const U* rows, std::size_t n, std::size_t dim, const 
       while (m < most && (m < least || kept < params.variance_share * total))
         kept += std::max(0.0, values(static_cast<long>(dim - 1 - m++)));
     }
-    projection_.resize(dim * m);
-    for (std::size_t a = 0; a < dim; ++a)
-      for (std::size_t j = 0; j < m; ++j)
-        projection_[a * m + j] = solver.eigenvectors()(static_cast<long>(a), static_cast<long>(dim - 1 - j));
+    projection_.resize(m * dim);
+    for (std::size_t j = 0; j < m; ++j)
+      for (std::size_t a = 0; a < dim; ++a)
+        projection_[j * dim + a] = solver.eigenvectors()(static_cast<long>(a), static_cast<long>(dim - 1 - j));
   }
 
   projected_dims_ = m;
@@ -246,7 +246,8 @@ void PointForest<T>::build(const U* rows, std::size_t n, std::size_t dim, const 
         for (std::size_t a = 0; a < dim; ++a)
           centred(static_cast<long>(r), static_cast<long>(a)) = rows[(first + r) * dim + a] - mean_[a];
       if (params.pca) {
-        const Eigen::Map<const RowMatrixd> directions(projection_.data(), static_cast<long>(dim), static_cast<long>(m));
+        // Column j of this dim x m (column-major) matrix is direction j, as projection_ holds them.
+        const Eigen::Map<const Eigen::MatrixXd> directions(projection_.data(), static_cast<long>(dim), static_cast<long>(m));
         const RowMatrixd projected = centred * directions;
         for (std::size_t r = 0; r < count; ++r)
           for (std::size_t j = 0; j < m; ++j)
@@ -351,24 +352,28 @@ template <class T>
 template <class U>
 void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, const ForestSearchParams& search,
                                  Scratch& s, QueryStats& stats, Neighbor<T>* out) const {
+  stats.queries += 1;
+  for (const auto& c : search_trees(points, q, k, search, false, s, stats))
+    *out++ = Neighbor<T>{c.index, L2::to_distance(c.dist)};
+}
+
+template <class T>
+template <class U>
+std::vector<detail::Candidate<T>>& PointForest<T>::search_trees(const U* points, const T* q, std::size_t k,
+                                                                const ForestSearchParams& search, bool as_rows,
+                                                                Scratch& s, QueryStats& stats) const {
   using Branch = typename Scratch::Branch;
   using Term = typename Scratch::Term;
   using After = typename Scratch::After;
   const std::size_t n = size(), d = dim_, m = projected_dims_;
   s.start(n, m);
 
-  // Project the query (in double).
+  // The query's projected coordinates are computed when the search first needs them
+  // (Scratch::projected).
   double q_norm2 = 0;
-  for (std::size_t j = 0; j < m; ++j) s.query[j] = 0;
   for (std::size_t a = 0; a < d; ++a) {
     const double v = static_cast<double>(q[a]) - mean_[a];
     q_norm2 += v * v;
-    if (params_.pca) {
-      const double* direction_row = projection_.data() + a * m;
-      for (std::size_t j = 0; j < m; ++j) s.query[j] += v * direction_row[j];
-    } else {
-      s.query[a] = v;
-    }
   }
 
   // Pruning margin. A point p of a cell whose projected bound is B satisfies
@@ -418,7 +423,8 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
       // Most points do not enter: their original index (a cache miss) is read only for those that
       // may. A distance above `limit` may be partial: only exact ones are offered.
       for (std::size_t g = 0; g < group && first + g < fresh; ++g)
-        if (dist[g] <= limit && results.offer(dist[g], ids_[todo[first + g]])) prune_above = threshold(results.bound());
+        if (dist[g] <= limit && results.offer(dist[g], as_rows ? todo[first + g] : ids_[todo[first + g]]))
+          prune_above = threshold(results.bound());
     }
     s.ready.clear();
   };
@@ -453,7 +459,7 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
         return;
       }
       const std::uint32_t axis = node.axis();
-      const double x = s.query[axis];
+      const double x = s.projected(q, axis, mean_, projection_, params_.pca);
       const double to_left = x - node.left_max;
       const double to_right = node.right_min - x;
       const bool left_first = to_left <= to_right;
@@ -482,10 +488,9 @@ void PointForest<T>::search_rows(const U* points, const T* q, std::size_t k, con
     s.leave();
   }
   score_ready();
-  stats.queries += 1;
   stats.points_visited += checks;
   stats.nodes_visited += nodes_visited;
-  for (const auto& c : results.sorted()) *out++ = Neighbor<T>{c.index, L2::to_distance(c.dist)};
+  return results.sorted();
 }
 
 template <class T>
@@ -524,7 +529,7 @@ NeighborLists<T> PointForest<T>::knn_batch(const T* queries, std::size_t nq, std
 
 template class PointForest<float>;
 template class PointForest<double>;
-// The graph's search falls back on the trees' (point_forest_graph.cpp).
+// The graph's search falls back on the trees' (point_forest_graph.cpp)...
 template void PointForest<float>::search_rows(const float*, const float*, std::size_t, const ForestSearchParams&,
                                               Scratch&, QueryStats&, Neighbor<float>*) const;
 template void PointForest<float>::search_rows(const std::uint8_t*, const float*, std::size_t,
@@ -534,5 +539,14 @@ template void PointForest<double>::search_rows(const double*, const double*, std
 template void PointForest<double>::search_rows(const std::uint8_t*, const double*, std::size_t,
                                                const ForestSearchParams&, Scratch&, QueryStats&,
                                                Neighbor<double>*) const;
+// and starts from the trees' best points (point_forest_graph.cpp).
+template std::vector<detail::Candidate<float>>& PointForest<float>::search_trees(
+    const float*, const float*, std::size_t, const ForestSearchParams&, bool, Scratch&, QueryStats&) const;
+template std::vector<detail::Candidate<float>>& PointForest<float>::search_trees(
+    const std::uint8_t*, const float*, std::size_t, const ForestSearchParams&, bool, Scratch&, QueryStats&) const;
+template std::vector<detail::Candidate<double>>& PointForest<double>::search_trees(
+    const double*, const double*, std::size_t, const ForestSearchParams&, bool, Scratch&, QueryStats&) const;
+template std::vector<detail::Candidate<double>>& PointForest<double>::search_trees(
+    const std::uint8_t*, const double*, std::size_t, const ForestSearchParams&, bool, Scratch&, QueryStats&) const;
 
 }  // namespace kdspace

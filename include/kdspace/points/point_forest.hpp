@@ -41,6 +41,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/neighbor_graph.hpp"
+#include "kdspace/points/detail/result_sets.hpp"
 #include "kdspace/points/neighbor.hpp"
 
 namespace kdspace {
@@ -228,6 +229,8 @@ class PointForest {
 
   /// Nodes of tree t, depth first (read-only; for tools and tests).
   const std::vector<Node>& nodes(std::size_t t) const { return trees_.at(t).nodes; }
+  /// The neighbour graph over the rows of the copy of the points (read-only; for tools and tests).
+  const detail::NeighborGraph& graph() const { return graph_; }
 
  private:
   struct Tree {
@@ -243,12 +246,16 @@ class PointForest {
 
   void search(const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch, QueryStats& stats,
               Neighbor<T>* out) const;
+  /// The trees' search: the k best found, in (distance, index) order, indices being rows of the copy
+  /// of the points (as_rows) or the original ones; in scratch, valid until its next search.
+  template <class U>
+  std::vector<detail::Candidate<T>>& search_trees(const U* points, const T* q, std::size_t k,
+                                                  const ForestSearchParams& search, bool as_rows, Scratch& scratch,
+                                                  QueryStats& stats) const;
   template <class U>
   void search_graph(const U* points, const T* q, std::size_t k, std::size_t ef, Scratch& scratch, QueryStats& stats,
                     Neighbor<T>* out) const;
   void build_graph();
-  /// The leaf of the first tree that the query falls in: rows [first, first + count).
-  void entry_leaf(const T* q, Scratch& scratch, std::uint32_t& first, std::uint32_t& count) const;
   template <class U>  // U: T, or std::uint8_t when compact
   void search_rows(const U* points, const T* q, std::size_t k, const ForestSearchParams& search, Scratch& scratch,
                    QueryStats& stats, Neighbor<T>* out) const;
@@ -262,7 +269,7 @@ class PointForest {
   std::vector<std::uint8_t> bytes_;   // or, when compact, the same as bytes (points_ then empty)
   std::vector<std::uint32_t> ids_;    // original index of each row of points_
   std::vector<double> mean_;          // dim
-  std::vector<double> projection_;    // dim x projected_dims, row-major: column j = direction j
+  std::vector<double> projection_;    // projected_dims x dim, row-major: row j = direction j
   std::vector<Tree> trees_;
   double extent_ = 0;                 // largest |x - mean| over the points
   detail::NeighborGraph graph_;       // over the rows of points_ / bytes_
