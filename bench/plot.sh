@@ -2,13 +2,13 @@
 # Plots the benchmark results: docs/bench_points.png (exact 10-NN queries/s against dimension, one
 # line per library, uniform and clustered workloads side by side), docs/bench_rays.png (per scene,
 # kdspace's trace speed and build time against Embree user geometry's, 1 thread, with the targets)
-# and docs/bench_forest.png (approximate 10-NN: queries/s against recall@10, one panel per data set,
-# one line per library and number of trees).
+# and docs/bench_ann.png (approximate 10-NN: queries/s against recall@10, one panel per data set,
+# one line per library).
 #
 # usage: bench/plot.sh [RESULTS_DIR [OUT_DIR]]     (defaults: bench/results, docs)
 #
 # Reads RESULTS_DIR/points.jsonl and, when present, RESULTS_DIR/rays.jsonl (the JSON lines of
-# kdspace-bench and kdspace-rays-bench) and RESULTS_DIR/forest.jsonl (kdspace-forest-bench);
+# kdspace-bench and kdspace-rays-bench) and RESULTS_DIR/ann.jsonl (kdspace-ann-bench);
 # python3 (standard library only) turns them into .dat files
 # and the plot commands, bench/plot.gp draws them with gnuplot. Without rays.jsonl (or with no
 # summary lines in it) the rays picture is not made.
@@ -116,45 +116,51 @@ PYTHON
 gnuplot -e "series='$work/series.gp'; out_points='$out/bench_points.png'" "$here/plot.gp"
 echo "plot.sh: wrote $out/bench_points.png"
 
-# ---- (c) the forest: queries/s against recall@10, a complete gnuplot script made here -----------------
-if [ -f "$results/forest.jsonl" ]; then
-  python3 - "$results/forest.jsonl" "$work" "$out/bench_forest.png" <<'PYTHON'
+# ---- (c) approximate search: queries/s against recall@10, a complete gnuplot script made here ---------
+if [ -f "$results/ann.jsonl" ]; then
+  python3 - "$results/ann.jsonl" "$work" "$out/bench_ann.png" <<'PYTHON'
 import json, os, sys
 path, work, png = sys.argv[1:4]
 rows = [json.loads(l) for l in open(path) if l.startswith("{")]
-rows = [r for r in rows if r.get("bench") == "forest" and "recall10" in r and "qps" in r]
+rows = [r for r in rows if r.get("bench") == "ann" and r.get("op") == "curve"]
 datasets = []
 for r in rows:
     if r["dataset"] not in datasets:
         datasets.append(r["dataset"])
-colours = {("kdspace", 1): "#fdae6b", ("kdspace", 2): "#fd8d3c", ("kdspace", 4): "#e6550d", ("kdspace", 8): "#a63603",
-           ("flann", 4): "#6baed6", ("flann", 8): "#08519c"}
-script = ["set terminal pngcairo size 1500,900 enhanced font 'DejaVu Sans,11'",
+# One line per library; the forest's settings are split by number of trees.
+def line_of(r):
+    if r["library"] == "kdspace forest":
+        return "kdspace forest, " + r["setting"].split(",")[0]
+    return r["library"]
+colours = {"kdspace graph": "#d62728", "kdspace forest, trees 1": "#fdae6b", "kdspace forest, trees 4": "#e6550d",
+           "hnswlib": "#1f77b4", "faiss HNSW": "#2ca02c", "faiss IVF-Flat": "#9467bd", "FLANN": "#7f7f7f"}
+columns = min(3, max(1, len(datasets)))
+script = ["set terminal pngcairo size 1500,%d enhanced font 'DejaVu Sans,11'" % (450 * ((len(datasets) + 2) // 3)),
           f"set output '{png}'",
           "set grid xtics ytics lc rgb '#dddddd'",
           "set key bottom left box opaque samplen 3 font ',9'",
-          "set logscale y 10", "set xrange [0.5:1.005]", "set xlabel 'recall at k = 10'", "set ylabel 'queries / s (1 thread)'",
-          f"set multiplot layout {(len(datasets) + 2) // 3},{min(3, len(datasets))} title "
-          "'kdspace-forest-bench: approximate 10-NN, kdspace PointForest vs FLANN KDTreeIndex (checks 16..4096 along each line)' font ',13'"]
+          "set logscale y 10", "set xrange [0.8:1.002]", "set xlabel 'recall at k = 10'", "set ylabel 'queries / s (1 thread)'",
+          f"set multiplot layout {(len(datasets) + 2) // 3},{columns} title "
+          "'kdspace-ann-bench: approximate 10-NN, one line per library (its budget grows along the line)' font ',13'"]
 for d in datasets:
     parts = []
-    for (lib, trees), colour in colours.items():
-        pts = sorted((r["checks"], r["recall10"], r["qps"]) for r in rows if r["dataset"] == d and r["library"] == lib and r["trees"] == trees)
+    for line, colour in colours.items():
+        pts = [(r["recall10"], r["qps"]) for r in rows if r["dataset"] == d and line_of(r) == line]
         if not pts:
             continue
-        dat = os.path.join(work, f"forest_{d}_{lib}_{trees}.dat".replace("/", "_"))
+        dat = os.path.join(work, f"ann_{d}_{line}.dat".replace("/", "_").replace(" ", "_").replace(",", ""))
         with open(dat, "w") as f:
-            for _, rec, qps in pts:
+            for rec, qps in pts:  # in the order of the budgets
                 f.write(f"{rec} {qps}\n")
-        dash = 1 if lib == "kdspace" else 2
-        parts.append(f"'{dat}' using 1:2 with linespoints lw 2 pt 7 ps 0.7 dt {dash} lc rgb '{colour}' title '{lib}, {trees} tree{'s' if trees > 1 else ''}'")
-    dim = next(r["dim"] for r in rows if r["dataset"] == d)
-    script.append(f"set title '{os.path.basename(d)} ({dim}-D)'")
-    script.append("plot " + ", ".join(parts))
+        width = 3 if line == "kdspace graph" else 2
+        parts.append(f"'{dat}' using 1:2 with linespoints lw {width} pt 7 ps 0.6 lc rgb '{colour}' title '{line}'")
+    first = next(r for r in rows if r["dataset"] == d)
+    script.append(f"set title '{os.path.basename(d)} ({first['dim']}-D, {first['n']:,} points)'")
+    script.append("plot " + ", ".join(parts) if parts else "plot 1 notitle")
 script.append("unset multiplot")
-open(os.path.join(work, "forest.gp"), "w").write("\n".join(script) + "\n")
+open(os.path.join(work, "ann.gp"), "w").write("\n".join(script) + "\n")
 PYTHON
-  gnuplot "$work/forest.gp" && echo "plot.sh: wrote $out/bench_forest.png"
+  gnuplot "$work/ann.gp" && echo "plot.sh: wrote $out/bench_ann.png"
 fi
 # ---- (b) rays: kdspace against the peer on every scene, a complete gnuplot script made here ------------
 if [ -f "$results/rays.jsonl" ] && grep -q '"bench":"rays-summary"' "$results/rays.jsonl"; then

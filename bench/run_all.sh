@@ -2,18 +2,20 @@
 # Runs the whole benchmark and plots it:
 #   build/bench/bench/kdspace-bench (all point workloads)  -> bench/results/points.md, points.jsonl
 #   build/bench/bench/kdspace-rays-bench, when built       -> bench/results/rays.md, rays.jsonl
-#   build/bench/bench/kdspace-forest-bench                  -> bench/results/forest.md, forest.jsonl
+#   build/bench/bench/kdspace-ann-bench                     -> bench/results/ann.md, ann.jsonl
 #   bench/summary.py                                        -> bench/results/summary.md (points, ratios)
 #   bench/plot.sh                                           -> docs/bench_points.png, docs/bench_rays.png,
-#                                                              docs/bench_forest.png
+#                                                              docs/bench_ann.png
 #
 # usage: bench/run_all.sh [kdspace-bench options, e.g. --quick or --workload uniform3d]
 # environment: BUILD_DIR (default build/bench), RESULTS_DIR (default bench/results), PLOT_DIR
 #              (default docs), RAYS_BENCH_ARGS (options for kdspace-rays-bench), REAL_DATA_DIR (the
 #              real meshes for the rays bench; default BUILD_DIR/real_data, filled by
-#              bench/real_data/fetch.sh), FOREST_BENCH_ARGS
-#              (options for kdspace-forest-bench), IMAGES_DIR (the photographs for the forest
-#              bench; default BUILD_DIR/photos, filled from Debian's python3-skimage package)
+#              bench/real_data/fetch.sh), ANN_BENCH_ARGS
+#              (options for kdspace-ann-bench), IMAGES_DIR (the photographs for the ann bench;
+#              default BUILD_DIR/photos, from Debian's python3-skimage package), AUDIO_DIR (the
+#              recordings for the ann bench; default BUILD_DIR/audio, from Debian's
+#              asterisk-core-sounds-en-wav and asc-music packages)
 #
 # Build first: cmake --preset bench && cmake --build build/bench -j2
 # Each bench's stdout is kept whole in bench/results/*.log; its JSON lines go to *.jsonl, the rest
@@ -28,7 +30,7 @@ results=${RESULTS_DIR:-$root/bench/results}
 plots=${PLOT_DIR:-$root/docs}
 points_bench=$build/bench/kdspace-bench
 rays_bench=$build/bench/kdspace-rays-bench
-forest_bench=$build/bench/kdspace-forest-bench
+ann_bench=$build/bench/kdspace-ann-bench
 mkdir -p "$results"
 
 if [ ! -x "$points_bench" ]; then
@@ -78,27 +80,38 @@ else
   fi
 fi
 
-# The photographs of the forest bench's image descriptor data set: Debian's python3-skimage ships
-# them; its package is downloaded and unpacked here (not installed, and no Python runs).
-images=${IMAGES_DIR:-$build/photos}
-if [ -x "$forest_bench" ] && [ ! -f "$images/motorcycle_right.png" ]; then
+# The data of the ann bench's real data sets, from Debian packages downloaded and unpacked here (not
+# installed; no Python runs): the photographs of python3-skimage, a recorded voice
+# (asterisk-core-sounds-en-wav) and recorded music (asc-music). A package that cannot be fetched
+# leaves its data sets out.
+fetch() {  # fetch PACKAGE DIR PATTERN: the files of PACKAGE whose path matches PATTERN, into DIR
+  local unpack
   unpack=$(mktemp -d)
-  if (cd "$unpack" && apt-get download python3-skimage >/dev/null 2>&1) && dpkg -x "$unpack"/python3-skimage_*.deb "$unpack/x"; then
-    mkdir -p "$images"
-    find "$unpack/x" -path '*skimage/data/*.png' -exec cp {} "$images"/ \;
+  if (cd "$unpack" && apt-get download "$1" >/dev/null 2>&1) && dpkg -x "$unpack"/"$1"_*.deb "$unpack/x"; then
+    mkdir -p "$2"
+    (cd "$unpack/x" && find . -path "$3" -exec cp --parents {} "$2"/ \;)  # keeping their folders
+  else
+    echo "run_all.sh: apt-get download $1 failed" >&2
   fi
   rm -rf "$unpack"
+}
+images=${IMAGES_DIR:-$build/photos}
+audio=${AUDIO_DIR:-$build/audio}
+if [ -x "$ann_bench" ]; then
+  if [ ! -f "$images/motorcycle_right.png" ]; then  # the bench wants the photographs in one folder
+    fetch python3-skimage "$images.tmp" '*skimage/data/*.png'
+    mkdir -p "$images" && find "$images.tmp" -name '*.png' -exec cp {} "$images"/ \; && rm -rf "$images.tmp"
+  fi
+  [ -d "$audio/speech" ] || fetch asterisk-core-sounds-en-wav "$audio/speech" '*/sounds/en_US_f_Allison/*.wav'
+  [ -d "$audio/music" ] || fetch asc-music "$audio/music" '*/asc/music/*.mp3'
 fi
-forest_args=()
-if [ -f "$images/motorcycle_right.png" ]; then
-  forest_args=(--images "$images")
-else
-  echo "run_all.sh: no photographs in $images (apt-get download python3-skimage failed); the forest bench skips its image data set" >&2
-fi
+ann_args=()
+if [ -f "$images/motorcycle_right.png" ]; then ann_args+=(--images "$images"); fi
+if [ -d "$audio/speech" ] && [ -d "$audio/music" ]; then ann_args+=(--audio "$audio"); fi
 
-if [ -x "$forest_bench" ]; then
-  # shellcheck disable=SC2086  # FOREST_BENCH_ARGS is a list of options
-  run_bench forest "$forest_bench" "${forest_args[@]}" ${FOREST_BENCH_ARGS:-}
+if [ -x "$ann_bench" ]; then
+  # shellcheck disable=SC2086  # ANN_BENCH_ARGS is a list of options
+  run_bench ann "$ann_bench" "${ann_args[@]}" ${ANN_BENCH_ARGS:-}
 fi
 
 python3 "$here/summary.py" "$results/points.jsonl" > "$results/summary.md" || status=1
