@@ -103,7 +103,9 @@ def main():
         index = kdspace.Forest(data, trees=4)
         sample = data[np.random.default_rng(1).choice(len(data), 400, replace=False)]
         tuning = index.tune(0.9, k=50, queries=sample)
-        print(f"forest built and tuned: {tuning['trees']} trees, {tuning['checks']} checks "
+        chosen = (f"graph, ef {tuning['ef']}" if tuning["ef"] else
+                  f"{tuning['trees']} trees, {tuning['checks']} checks")
+        print(f"forest built and tuned: {chosen} "
               f"(recall@50 {tuning['validation_recall']:.2f} on held-out moments)")
     else:
         index = kdspace.KDTree(data)

@@ -12,6 +12,7 @@
 #include "kdspace/io/vectors.hpp"
 #include "kdspace/points/neighbor.hpp"
 #include "kdspace/points/params.hpp"
+#include "kdspace/points/point_forest.hpp"
 
 namespace kdspace::cli {
 

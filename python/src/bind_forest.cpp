@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "kdspace/points/point_forest.hpp"
@@ -36,14 +37,14 @@ class ForestIndex {
 
   const PointForest<T>& forest() const { return *forest_; }
 
-  /// The k nearest found within the budget: (distances, indices), nq x k each.
-  py::tuple knn(const CArray<T>& queries, std::size_t k, std::size_t checks, std::size_t trees,
+  /// The k nearest found within the budget (ef > 0: on the graph): (distances, indices), nq x k each.
+  py::tuple knn(const CArray<T>& queries, std::size_t k, std::size_t checks, std::size_t trees, std::size_t ef,
                 unsigned threads) const {
     const std::size_t nq = rows(queries);
     NeighborLists<T> found;
     {
       py::gil_scoped_release unlocked;
-      found = forest_->knn_batch(queries.data(), nq, k, ForestSearchParams{checks, trees}, threads);
+      found = forest_->knn_batch(queries.data(), nq, k, ForestSearchParams{checks, trees, ef}, threads);
     }
     return split(found, nq, k);
   }
@@ -59,7 +60,7 @@ class ForestIndex {
     return split(found, nq, k);
   }
 
-  /// The cheapest (trees, checks) for a mean recall@k: on the given queries, or (None) on base points.
+  /// The fastest setting (the graph's ef, or the trees' trees and checks) for a mean recall@k: on the given queries, or (None) on base points.
   py::dict tune(double recall, std::size_t k, py::object queries, const TuneParams& params) const {
     ForestTuning tuning;
     if (queries.is_none()) {
@@ -74,6 +75,7 @@ class ForestIndex {
     py::dict out;
     out["trees"] = tuning.trees;
     out["checks"] = tuning.checks;
+    out["ef"] = tuning.ef;
     out["target_recall"] = tuning.target_recall;
     out["tuning_recall"] = tuning.tuning_recall;
     out["validation_recall"] = tuning.validation_recall;
@@ -116,13 +118,15 @@ void bind_forest_index(py::module_& m, const char* name) {
       .def_property_readonly("tree_count", [](const Index& f) { return f.forest().tree_count(); })
       .def_property_readonly("projected_dims", [](const Index& f) { return f.forest().projected_dims(); })
       .def_property_readonly("compact", [](const Index& f) { return f.forest().compact(); })
+      .def_property_readonly("has_graph", [](const Index& f) { return f.forest().has_graph(); })
+      .def_property_readonly("graph_degree", [](const Index& f) { return f.forest().graph_degree(); })
       .def_property_readonly("depth", [](const Index& f) { return f.forest().depth(); })
       .def_property_readonly("leaf_count", [](const Index& f) { return f.forest().leaf_count(); })
       .def_property_readonly("node_count", [](const Index& f) { return f.forest().node_count(); })
       .def_property_readonly("memory_bytes", [](const Index& f) { return f.forest().memory_bytes(); })
       .def_property_readonly("index_bytes", [](const Index& f) { return f.forest().index_bytes(); })
       .def("knn", &Index::knn, py::arg("queries"), py::arg("k"), py::arg("checks"), py::arg("trees"),
-           py::arg("threads"))
+           py::arg("ef"), py::arg("threads"))
       .def("knn_exact", &Index::knn_exact, py::arg("queries"), py::arg("k"), py::arg("threads"))
       .def("tune", &Index::tune, py::arg("recall"), py::arg("k"), py::arg("queries"), py::arg("params"));
 }
@@ -140,13 +144,26 @@ void bind_forest(py::module_& m) {
       .def_readwrite("compact", &ForestParams::compact)
       .def_readwrite("candidate_axes", &ForestParams::candidate_axes)
       .def_readwrite("seed", &ForestParams::seed)
-      .def_readwrite("threads", &ForestParams::threads);
+      .def_readwrite("threads", &ForestParams::threads)
+      .def_property(
+          "graph",  // "auto", "on" or "off"
+          [](const ForestParams& p) {
+            return p.graph == GraphMode::automatic ? "auto" : p.graph == GraphMode::on ? "on" : "off";
+          },
+          [](ForestParams& p, const std::string& mode) {
+            if (mode != "auto" && mode != "on" && mode != "off")
+              throw Error("graph must be 'auto', 'on' or 'off', got '" + mode + "'");
+            p.graph = mode == "auto" ? GraphMode::automatic : mode == "on" ? GraphMode::on : GraphMode::off;
+          })
+      .def_readwrite("graph_degree", &ForestParams::graph_degree);
   py::class_<TuneParams>(m, "TuneParams")
       .def(py::init<>())
       .def_readwrite("sample_queries", &TuneParams::sample_queries)
       .def_readwrite("max_checks", &TuneParams::max_checks)
       .def_readwrite("seed", &TuneParams::seed)
-      .def_readwrite("threads", &TuneParams::threads);
+      .def_readwrite("threads", &TuneParams::threads)
+      .def_readwrite("graph", &TuneParams::graph)
+      .def_readwrite("trees", &TuneParams::trees);
   m.attr("unlimited_checks") = unlimited_checks;
   bind_forest_index<float>(m, "ForestIndex32");
   bind_forest_index<double>(m, "ForestIndex64");

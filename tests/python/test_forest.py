@@ -91,3 +91,58 @@ def test_bad_input_is_refused():
         forest.query(np.zeros(8), checks=0)
     with pytest.raises(ValueError, match="vectors of length 8"):
         forest.query(np.zeros(7))
+
+
+def test_graph_search_exact_budget_and_recall():
+    both = descriptors(4200, 24, 10)  # queries from the data's own clusters
+    data, queries = both[:4000], both[4000:]
+    forest = kdspace.Forest(data)
+    assert forest.has_graph and forest.graph_degree == 32
+    assert not kdspace.Forest(data, graph=False).has_graph
+    exact_d, exact_i = forest.query_exact(queries, k=10)
+    d, i = forest.query(queries, k=10, ef="exact")
+    np.testing.assert_array_equal(d, exact_d)
+    np.testing.assert_array_equal(i, exact_i)
+    recalls = []
+    for ef in [10, 40, 160]:
+        d, i = forest.query(queries, k=10, ef=ef)
+        true = np.sqrt(((queries[:, None, :].astype(np.float64) - data[i].astype(np.float64)) ** 2).sum(-1))
+        np.testing.assert_allclose(d, true, rtol=1e-5)
+        recalls.append(kdspace.recall_at_k(d, exact_d))
+    assert recalls[-1] > recalls[0] and recalls[-1] > 0.95
+    # the same graph whatever the build's thread count
+    built_on_all = kdspace.Forest(data, workers=-1)
+    np.testing.assert_array_equal(built_on_all.query(queries, k=10, ef=40)[1], forest.query(queries, k=10, ef=40)[1])
+
+
+def test_tune_on_the_graph_becomes_the_default_and_survives_pickling():
+    both = descriptors(6500, 32, 12)
+    data, queries = both[:6000], both[6000:]
+    forest = kdspace.Forest(data, degree=16)
+    tuning = forest.tune(0.95, k=5, queries=queries[:400], method="graph")
+    assert tuning["ef"] > 0 and forest.ef == tuning["ef"]
+    assert tuning["validation_recall"] >= 0.9
+    d, i = forest.query(queries[400:], k=5)
+    np.testing.assert_array_equal(i, forest.query(queries[400:], k=5, ef=forest.ef)[1])
+    copy = pickle.loads(pickle.dumps(forest))
+    assert copy.ef == forest.ef and copy.graph_degree == 16
+    np.testing.assert_array_equal(copy.query(queries[400:], k=5)[1], i)
+    trees_only = forest.tune(0.9, k=5, queries=queries[:400], method="trees")
+    assert trees_only["ef"] == 0 and forest.ef == 0
+
+
+def test_graph_options_are_checked():
+    data = descriptors(300, 8, 14)
+    with pytest.raises(ValueError, match="graph must be"):
+        kdspace.Forest(data, graph="sometimes")
+    with pytest.raises(ValueError, match="graph_degree"):
+        kdspace.Forest(data, degree=1)
+    forest = kdspace.Forest(data)
+    with pytest.raises(ValueError, match="one or the other"):
+        forest.query(data[:2], k=2, ef=8, checks=8)
+    with pytest.raises(ValueError, match="ef must be at least 1"):
+        forest.query(data[:2], k=2, ef=0)
+    with pytest.raises(ValueError, match="has none"):
+        kdspace.Forest(data, graph=False).query(data[:2], k=2, ef=8)
+    with pytest.raises(ValueError, match="needs a forest built with its graph"):
+        kdspace.Forest(data, graph=False).tune(0.9, k=2, method="graph")
