@@ -30,6 +30,8 @@
 //   --reps R          repetitions (default 3; 1 with --quick)
 //   --queries Q       at most Q queries per workload
 //   --min-time S      seconds each measurement runs at least (default 0.1)
+//   --clock wall|cpu  wall time (default), or the process's CPU time, which other work on a busy
+//                     machine does not inflate (no 2-thread figures then)
 //   --real DIR        the real scans and meshes listed in DIR/real_data.txt (bench/real_data/fetch.sh)
 //   --images DIR      the photographs for the images128d set (bench/run_all.sh fetches them)
 //   --python-peers SCRIPT  run SCRIPT (bench/python_peers.py) with /usr/bin/python3 on every workload
@@ -85,9 +87,22 @@
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
+// The clock of every measurement: wall time (steady_clock), or with --clock cpu the CPU time of the
+// whole process (every thread of every library counted), which a machine busy with other work
+// cannot inflate by taking the processor away; the 2-thread measurements need the wall clock and are
+// left out then.
+bool g_cpu_clock = false;
 
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+double clock_now() {
+  if (g_cpu_clock) {
+    timespec t;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+  }
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+double seconds_since(double start) { return clock_now() - start; }
 double dbl(std::size_t x) { return static_cast<double>(x); }
 
 // A measurement repeats its operation until the repetitions add up to this many seconds, and
@@ -288,7 +303,7 @@ class KdspaceLibrary : public Library {
       : Library(problem, std::move(library_key), std::move(library_label), true) {}
 
   double build() override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     tree_ = std::make_unique<Tree>(p.base.data(), p.n, p.dim);  // default BuildParams: leaf 16, 1 thread
     return seconds_since(start);
   }
@@ -298,7 +313,7 @@ class KdspaceLibrary : public Library {
   double knn(std::size_t k, double eps, KnnAnswers& out) override {
     kdspace::SearchParams params;
     params.eps = eps;
-    const auto start = Clock::now();
+    const double start = clock_now();
     const auto lists = tree_->knn_batch(p.queries.data(), p.nq, k, params, 1);
     const double s = seconds_since(start);
     copy(lists, k, out);
@@ -307,7 +322,7 @@ class KdspaceLibrary : public Library {
 
   double knn_loop(std::size_t k, KnnAnswers& out) override {
     out.reset(p.nq, k);
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t q = 0; q < p.nq; ++q) {
       const auto found = tree_->knn(p.queries.data() + q * p.dim, k);
       for (std::size_t j = 0; j < k; ++j) out.ids[q * k + j] = found[j].index, out.dists[q * k + j] = found[j].distance;
@@ -316,7 +331,7 @@ class KdspaceLibrary : public Library {
   }
 
   double radius(float r, std::vector<std::uint32_t>& counts) override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     const auto lists = tree_->radius_batch(p.queries.data(), p.nq, r, std::numeric_limits<std::size_t>::max(), 1);
     const double s = seconds_since(start);
     counts.resize(p.nq);
@@ -327,7 +342,7 @@ class KdspaceLibrary : public Library {
   double box(BoxAnswers& out) override {
     out.counts.assign(p.nq, 0);
     out.lists.assign(p.scan_boxes, {});
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t b = 0; b < p.nq; ++b) {
       auto found = tree_->box(p.box_lo.data() + b * p.dim, p.box_hi.data() + b * p.dim);
       out.counts[b] = static_cast<std::uint32_t>(found.size());
@@ -337,7 +352,7 @@ class KdspaceLibrary : public Library {
   }
 
   double knn_threads(std::size_t k, unsigned threads, KnnAnswers& out) override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     const auto lists = tree_->knn_batch(p.queries.data(), p.nq, k, {}, threads);
     const double s = seconds_since(start);
     copy(lists, k, out);
@@ -358,7 +373,7 @@ class FlannLibrary : public Library {
 
   double build() override {
     flann::Matrix<float> data(const_cast<float*>(p.base.data()), p.n, p.dim);
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_ = std::make_unique<Index>(data, flann::KDTreeSingleIndexParams(10));  // reorder = true: copies the points
     index_->buildIndex();
     return seconds_since(start);
@@ -389,7 +404,7 @@ class FlannLibrary : public Library {
     flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0.0f, true);  // sorted, like the others
     params.cores = 1;
     params.max_neighbors = -1;
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_->radiusSearch(q, ids, dists, r * r, params);
     const double s = seconds_since(start);
     counts.resize(p.nq);
@@ -409,7 +424,7 @@ class FlannLibrary : public Library {
     // FLANN applies eps to squared distances: a result within (1 + eps) of the true squared distance.
     flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, static_cast<float>(eps), true);
     params.cores = static_cast<int>(threads);
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_->knnSearch(q, id_matrix, dist_matrix, k, params);
     const double s = seconds_since(start);
     for (std::size_t i = 0; i < p.nq * k; ++i) {
@@ -439,7 +454,7 @@ class NanoflannLibrary : public Library {
         cloud_{problem.base.data(), problem.n, problem.dim} {}
 
   double build() override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_ = std::make_unique<Index>(static_cast<int>(p.dim), cloud_, nanoflann::KDTreeSingleIndexAdaptorParams(10));
     return seconds_since(start);
   }
@@ -451,7 +466,7 @@ class NanoflannLibrary : public Library {
   double knn(std::size_t k, double eps, KnnAnswers& out) override {
     out.reset(p.nq, k);
     const nanoflann::SearchParams params(32, static_cast<float>(eps));
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t q = 0; q < p.nq; ++q) {
       nanoflann::KNNResultSet<float, std::uint32_t> results(k);
       results.init(out.ids.data() + q * k, out.dists.data() + q * k);
@@ -469,7 +484,7 @@ class NanoflannLibrary : public Library {
     std::vector<std::pair<std::uint32_t, float>> found;
     const nanoflann::SearchParams params(32, 0.f, true);  // sorted, like the others
     const float r2 = r * r;
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t q = 0; q < p.nq; ++q)
       counts[q] = static_cast<std::uint32_t>(index_->radiusSearch(p.queries.data() + q * p.dim, r2, found, params));
     return seconds_since(start);
@@ -491,7 +506,7 @@ class ScanLibrary : public Library {
     out.counts.assign(p.scan_boxes, 0);
     out.lists.assign(p.scan_boxes, {});
     const std::size_t d = p.dim;
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t b = 0; b < p.scan_boxes; ++b) {
       const float* lo = p.box_lo.data() + b * d;
       const float* hi = p.box_hi.data() + b * d;
@@ -520,7 +535,7 @@ class CgalLibrary : public Library {
   }
 
   double build() override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     tree_ = std::make_unique<Tree>(points_.begin(), points_.end());
     tree_->build();  // CGAL builds lazily on the first query otherwise
     return seconds_since(start);
@@ -531,7 +546,7 @@ class CgalLibrary : public Library {
   double knn(std::size_t k, double eps, KnnAnswers& out) override {
     if (eps != 0) return -1;
     out.reset(p.nq, k);
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t q = 0; q < p.nq; ++q) {
       Search search(*tree_, point(p.queries.data() + q * 3), static_cast<unsigned>(k));
       std::size_t j = 0;
@@ -545,7 +560,7 @@ class CgalLibrary : public Library {
   // Fuzzy_sphere with fuzziness 0 keeps the points at distance <= r; counted, not stored.
   double radius(float r, std::vector<std::uint32_t>& counts) override {
     counts.assign(p.nq, 0);
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t q = 0; q < p.nq; ++q)
       tree_->search(Counter{&counts[q]}, CGAL::Fuzzy_sphere<Traits>(point(p.queries.data() + q * 3), r, 0.f));
     return seconds_since(start);
@@ -555,7 +570,7 @@ class CgalLibrary : public Library {
   double box(BoxAnswers& out) override {
     out.counts.assign(p.nq, 0);
     out.lists.clear();
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t b = 0; b < p.nq; ++b)
       tree_->search(Counter{&out.counts[b]}, CGAL::Fuzzy_iso_box<Traits>(point(p.box_lo.data() + b * 3),
                                                                          point(p.box_hi.data() + b * 3), 0.f));
@@ -620,7 +635,7 @@ class FaissFlatLibrary : public Library {
     set_threads(threads);
     std::vector<faiss::Index::idx_t> ids(p.nq * k);
     out.reset(p.nq, k);
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_->search(static_cast<faiss::Index::idx_t>(p.nq), p.queries.data(), static_cast<faiss::Index::idx_t>(k),
                    out.dists.data(), ids.data());
     const double s = seconds_since(start);
@@ -809,7 +824,8 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
     record(lib, op, s, p.nq);
     lib.recall[i] = recall_at_10(answers, *refs.knn[1]);
   }
-  if (const double s = timed([&] { return lib.knn_threads(10, 2, answers); }); s >= 0) {
+  if (g_cpu_clock) {  // CPU time adds up both threads: no 2-thread figure
+  } else if (const double s = timed([&] { return lib.knn_threads(10, 2, answers); }); s >= 0) {
     record(lib, kBatch2, s, p.nq);
     note_disagreements(lib, kBatch2, knn_disagreements(answers, *refs.knn[1]));
   }
@@ -1096,7 +1112,8 @@ void run_python_peers(const std::string& script, const Problem& p, const std::ve
     knn10 = std::max(knn10, qps(*lib, kKnn10));
   }
   const std::string command = "/usr/bin/python3 '" + script + "' '" + dir + "' '" + p.name + "' --reps " +
-                              std::to_string(reps) + " --min-time " + fixed(g_min_seconds, 3) + " --kdspace " +
+                              std::to_string(reps) + " --min-time " + fixed(g_min_seconds, 3) +
+                              (g_cpu_clock ? " --clock cpu" : "") + " --kdspace " +
                               fixed(build, 6) + " " + fixed(knn1, 1) + " " + fixed(knn10, 1);
   std::fprintf(stderr, "%s: python peers: %s\n", p.name.c_str(), command.c_str());
   std::fflush(stdout);
@@ -1108,6 +1125,7 @@ void run_python_peers(const std::string& script, const Problem& p, const std::ve
 int usage() {
   std::fprintf(stderr,
                "usage: kdspace-bench [--workload NAME]... [--quick] [--reps R] [--queries Q] [--min-time S]\n"
+               "                     [--clock wall|cpu]\n"
                "                     [--real DIR] [--images DIR] [--python-peers SCRIPT]\n"
                "                     [--fvecs BASE QUERIES]... [--bvecs BASE QUERIES]... [--list]\n");
   return 2;
@@ -1151,6 +1169,10 @@ int main(int argc, char** argv) {
       const char* v = next();
       if (!v || std::strtoull(v, nullptr, 10) == 0) return usage();
       (arg == "--reps" ? reps : max_queries) = std::strtoull(v, nullptr, 10);
+    } else if (arg == "--clock") {
+      const char* v = next();
+      if (!v || (std::strcmp(v, "cpu") != 0 && std::strcmp(v, "wall") != 0)) return usage();
+      g_cpu_clock = std::strcmp(v, "cpu") == 0;
     } else if (arg == "--min-time") {
       const char* v = next();
       if (!v || !(std::strtod(v, nullptr) >= 0)) return usage();
@@ -1210,7 +1232,7 @@ int main(int argc, char** argv) {
               "%s KDTreeSingleIndex (leaf 10, reordered), nanoflann 0x%x KDTreeSingleIndexAdaptor (leaf 10)%s%s; "
               "compile-time dimension variants where the dimension is 3, 8 or 16. One thread unless a column says "
               "otherwise; q/s = queries per second; builds on one thread; each figure is the mean over as many "
-              "passes as take %.2f s, median of the interleaved repetitions.\n",
+              "passes as take %.2f s (%s), median of the interleaved repetitions.\n",
               KDSPACE_VERSION_MAJOR, KDSPACE_VERSION_MINOR, KDSPACE_VERSION_PATCH, FLANN_VERSION_, NANOFLANN_VERSION,
 #ifdef KDSPACE_BENCH_CGAL
               ", CGAL " CGAL_VERSION_STR " Kd_tree (3-D only; sliding midpoint, bucket 10)",
@@ -1222,7 +1244,7 @@ int main(int argc, char** argv) {
 #else
               ", no FAISS (not found at build time)",
 #endif
-              g_min_seconds);
+              g_min_seconds, g_cpu_clock ? "process CPU time: --clock cpu" : "wall time");
   std::printf("kdspace's 1-thread k-NN columns are knn_batch(..., threads = 1); the single-query-loop columns call "
               "knn() once per query. FLANN answers through its batch knnSearch (cores = 1), nanoflann one query at a "
               "time. index B/pt: bytes the index holds besides a copy of the points: kdspace index_bytes() / n; "

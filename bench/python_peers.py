@@ -4,7 +4,7 @@
 kdspace-bench --python-peers bench/python_peers.py runs this once per workload with Debian's
 interpreter (/usr/bin/python3, which sees python3-pykdtree and python3-scipy):
 
-    /usr/bin/python3 bench/python_peers.py DIR WORKLOAD --reps R --min-time S --kdspace BUILD_S KNN1 KNN10
+    /usr/bin/python3 bench/python_peers.py DIR WORKLOAD --reps R --min-time S [--clock cpu] --kdspace BUILD_S KNN1 KNN10
 
 DIR holds base.npy and queries.npy (float32, one point a row) and exact1.npy / exact10.npy, kdspace's
 exact 1-NN and 10-NN distances. Both trees are built with their default parameters (leaf size 16) on
@@ -28,13 +28,16 @@ from pykdtree.kdtree import KDTree  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
 
+CLOCK = time.perf_counter  # or time.process_time with --clock cpu (as kdspace-bench's --clock cpu)
+
+
 def timed(run, min_seconds):
     """Runs `run` until the runs add up to min_seconds; mean seconds of one, and the last result."""
     total, runs = 0.0, 0
     while True:
-        start = time.perf_counter()
+        start = CLOCK()
         result = run()
-        total += time.perf_counter() - start
+        total += CLOCK() - start
         runs += 1
         if total >= min_seconds:
             return total / runs, result
@@ -80,7 +83,11 @@ def main():
     parser.add_argument("--reps", type=int, default=3)
     parser.add_argument("--min-time", type=float, default=0.1)
     parser.add_argument("--kdspace", type=float, nargs=3, metavar=("BUILD_S", "KNN1", "KNN10"))
+    parser.add_argument("--clock", choices=("wall", "cpu"), default="wall")
     args = parser.parse_args()
+    global CLOCK
+    if args.clock == "cpu":
+        CLOCK = time.process_time
 
     base = np.load(os.path.join(args.dir, "base.npy"))
     queries = np.load(os.path.join(args.dir, "queries.npy"))
@@ -99,8 +106,8 @@ def main():
 
     n, nq = base.shape[0], queries.shape[0]
     kd_build, kd1, kd10 = args.kdspace if args.kdspace else (None, None, None)
-    print("Python peers (separate process, /usr/bin/python3 %d.%d, one thread): kdspace's best figure ÷ the peer's"
-          % sys.version_info[:2])
+    print("Python peers (separate process, /usr/bin/python3 %d.%d, one thread, %s): kdspace's best figure ÷ the peer's"
+          % (sys.version_info[0], sys.version_info[1], "process CPU time" if args.clock == "cpu" else "wall time"))
     print("(build: the peer's time ÷ kdspace's, so above 1 = kdspace faster).\n")
     print("| library | build s | 1-NN q/s | 10-NN q/s | kdspace build speed-up | kdspace 1-NN ÷ | kdspace 10-NN ÷ |"
           " k-NN distances differing |")
