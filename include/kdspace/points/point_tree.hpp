@@ -486,7 +486,11 @@ class PointTree {
   void scan_batch(const T* queries, std::size_t first, std::size_t last, std::size_t k, Neighbor<T>* out,
                   unsigned threads, std::vector<QueryStats>& per_worker) const {
     const std::size_t d = dim();
-    detail::parallel_for(last - first, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
+    // One call of the scan per thread (at least 64 queries a call): each call converts every point
+    // once, so small calls would repeat that work.
+    const std::size_t workers = detail::resolve_threads(threads);
+    const std::size_t chunk = std::max<std::size_t>(64, (last - first + workers - 1) / workers);
+    detail::parallel_for(last - first, threads, chunk, [&](std::size_t begin, std::size_t end, unsigned worker) {
       const std::size_t q0 = first + begin, count = end - begin;
       if constexpr (std::is_same_v<Metric, L2>) {
         const detail::ScanData<T> data{points_.data(), order_.data(), size(), d, centre_.data()};
