@@ -49,8 +49,8 @@ NeighborLists<T> first_of_each_row(const NeighborLists<T>& lists, std::size_t mo
 
 /// The answers, rows in query order (base order with self); the join's work is added to `stats`
 /// (nodes visited: node pairs; points visited: distances).
-template <class T, class Metric>
-NeighborLists<T> search_by_join(const PointTree<T, Dynamic, Metric>& tree, const io::Matrix<T>& queries,
+template <class T, int Dim, class Metric>
+NeighborLists<T> search_by_join(const PointTree<T, Dim, Metric>& tree, const io::Matrix<T>& queries,
                                 const JoinRequest& request, QueryStats& stats) {
   JoinParams params;
   params.threads = request.threads;
@@ -62,7 +62,7 @@ NeighborLists<T> search_by_join(const PointTree<T, Dynamic, Metric>& tree, const
   } else {
     BuildParams build;
     build.threads = request.threads;
-    const PointTree<T, Dynamic, Metric> query_tree(queries.data.data(), queries.rows, queries.cols, build);
+    const PointTree<T, Dim, Metric> query_tree(queries.data.data(), queries.rows, queries.cols, build);
     if (request.knn) {
       found = knn_join(query_tree, tree, request.k, params, &join);
     } else {

@@ -185,7 +185,7 @@ class PointTree {
     out.neighbors.resize(nq * k);
     std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
     auto by_tree = [&](std::size_t first, std::size_t last) {
-      const std::vector<std::size_t> visit = leaf_order(queries, first, last);
+      const std::vector<std::size_t> visit = visit_order(queries, first, last);
       detail::parallel_for(last - first, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
         std::vector<detail::Candidate<T>> scratch;
         for (std::size_t i = begin; i < end; ++i)
@@ -225,7 +225,7 @@ class PointTree {
     const T limit = metric_.to_internal(r);
     std::vector<std::vector<Neighbor<T>>> rows(nq);
     std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
-    const std::vector<std::size_t> visit = leaf_order(queries, 0, nq);
+    const std::vector<std::size_t> visit = visit_order(queries, 0, nq);
     detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
       std::vector<detail::Candidate<T>> scratch;
       for (std::size_t i = begin; i < end; ++i) {
@@ -554,7 +554,7 @@ class PointTree {
   // differs: 1.75x the queries a second for 10-NN (1.5x for 1-NN) on 1e6 uniform 3-D points queried
   // in random order, where the tree is far larger than the caches; a few percent on 1e5 points.
   // Small batches keep their order.
-  std::vector<std::size_t> leaf_order(const T* queries, std::size_t first, std::size_t last) const {
+  std::vector<std::size_t> visit_order(const T* queries, std::size_t first, std::size_t last) const {
     std::vector<std::size_t> visit(last - first);
     if (last - first < locality_batch || last > UINT32_MAX) {
       for (std::size_t i = 0; i < visit.size(); ++i) visit[i] = first + i;
