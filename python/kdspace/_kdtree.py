@@ -336,6 +336,9 @@ class KDTree:
         results = [[] for _ in range(self.n)]
         if self._core is None or other._core is None:
             return results
+        joined = self._core.join_pairs(other._core, radius, p, "lists")
+        if joined is not None:
+            return joined
         queries, ids = self._query_rows()
         lists = other._core.ball_lists(queries, np.full(len(queries), radius), p, 1, True)
         for row, found in zip(ids.tolist(), lists):
@@ -353,8 +356,12 @@ class KDTree:
         if self._core is None:
             first = second = np.empty(0, dtype=np.intp)
         else:
-            queries, ids = self._query_rows()
-            first, second, _ = self._core.ball_pairs(queries, radius, p, 1, ids, True)
+            joined = self._core.join_pairs(None, radius, p, "pairs")
+            if joined is not None:
+                first, second = joined
+            else:
+                queries, ids = self._query_rows()
+                first, second, _ = self._core.ball_pairs(queries, radius, p, 1, ids, True)
         if output_type == "set":
             return set(zip(first.tolist(), second.tolist()))
         return np.stack([first, second], axis=1).astype(np.intp, copy=False).reshape(-1, 2)
@@ -405,16 +412,26 @@ class KDTree:
                 raise ValueError("Number of weights differ from the number of data points")
 
         unique, first_of, inverse = np.unique(radii, return_index=True, return_inverse=True)
+        # Counts at the distinct radii: cumulative from the join, per bin from the single-tree path.
+        totals = bins = None
         if self._core is None or other._core is None or len(unique) == 0:
             bins = np.zeros(len(unique))
         else:
-            queries, ids = self._query_rows()
-            query_weights = None if own is None else np.ascontiguousarray(own[ids])
-            bins = other._core.pair_histogram(queries, query_weights, unique, others, p, 1)
-        if not weighted:
-            bins = np.rint(bins).astype(np.intp)
+            totals = self._core.join_counts(other._core, unique, own, others, p)
+            if totals is None:
+                queries, ids = self._query_rows()
+                query_weights = None if own is None else np.ascontiguousarray(own[ids])
+                bins = other._core.pair_histogram(queries, query_weights, unique, others, p, 1)
+        if totals is not None:
+            if not weighted:
+                totals = np.rint(totals).astype(np.intp)
+            bins = np.diff(totals, prepend=totals.dtype.type(0))
+        else:
+            if not weighted:
+                bins = np.rint(bins).astype(np.intp)
+            totals = np.cumsum(bins)
         if cumulative:
-            result = np.cumsum(bins)[inverse]
+            result = totals[inverse]
         else:
             result = np.zeros(len(radii), dtype=bins.dtype)
             result[first_of] = bins
@@ -439,8 +456,12 @@ class KDTree:
             first = second = np.empty(0, dtype=np.intp)
             values = np.empty(0)
         else:
-            queries, ids = self._query_rows()
-            first, second, values = other._core.ball_pairs(queries, max_distance, p, 1, ids, False)
+            joined = self._core.join_pairs(other._core, max_distance, p, "distances")
+            if joined is not None:
+                first, second, values = joined
+            else:
+                queries, ids = self._query_rows()
+                first, second, values = other._core.ball_pairs(queries, max_distance, p, 1, ids, False)
         if output_type == "dict":
             return dict(zip(zip(first.tolist(), second.tolist()), values.tolist()))
         if output_type == "ndarray":
