@@ -119,7 +119,8 @@ class TreeSearcher final : public Searcher<T> {
   using Metric = std::decay_t<decltype(std::declval<const Tree&>().metric())>;
   // The metrics the joins serve (kdspace/joins/space.hpp).
   static constexpr bool joinable =
-      std::is_same_v<Metric, L2> || std::is_same_v<Metric, L1> || std::is_same_v<Metric, Linf>;
+      std::is_same_v<S, T> &&
+      (std::is_same_v<Metric, L2> || std::is_same_v<Metric, L1> || std::is_same_v<Metric, Linf>);
 
  public:
   TreeSearcher(Tree tree, std::shared_ptr<const RowMap> map) : tree_(std::move(tree)), map_(std::move(map)) {}
