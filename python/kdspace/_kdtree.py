@@ -412,26 +412,16 @@ class KDTree:
                 raise ValueError("Number of weights differ from the number of data points")
 
         unique, first_of, inverse = np.unique(radii, return_index=True, return_inverse=True)
-        # Counts at the distinct radii: cumulative from the join, per bin from the single-tree path.
-        totals = bins = None
         if self._core is None or other._core is None or len(unique) == 0:
             bins = np.zeros(len(unique))
         else:
-            totals = self._core.join_counts(other._core, unique, own, others, p)
-            if totals is None:
-                queries, ids = self._query_rows()
-                query_weights = None if own is None else np.ascontiguousarray(own[ids])
-                bins = other._core.pair_histogram(queries, query_weights, unique, others, p, 1)
-        if totals is not None:
-            if not weighted:
-                totals = np.rint(totals).astype(np.intp)
-            bins = np.diff(totals, prepend=totals.dtype.type(0))
-        else:
-            if not weighted:
-                bins = np.rint(bins).astype(np.intp)
-            totals = np.cumsum(bins)
+            queries, ids = self._query_rows()
+            query_weights = None if own is None else np.ascontiguousarray(own[ids])
+            bins = other._core.pair_histogram(queries, query_weights, unique, others, p, 1)
+        if not weighted:
+            bins = np.rint(bins).astype(np.intp)
         if cumulative:
-            result = totals[inverse]
+            result = np.cumsum(bins)[inverse]
         else:
             result = np.zeros(len(radii), dtype=bins.dtype)
             result[first_of] = bins

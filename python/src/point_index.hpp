@@ -167,32 +167,6 @@ class PointIndex {
     return py::make_tuple(a, c, take_vector(std::move(pairs.distance), {count}));
   }
 
-  /// Cumulative pair counts of this tree's points with other's by a join (Searcher::join_counts) at
-  /// each radius, weighted when either weights is given (by rows), or None where the join does not
-  /// apply.
-  py::object join_counts(py::object other, const CArray<double>& radii, py::object weights,
-                         py::object other_weights, double p) {
-    PointIndex* b = joinable_with(other, p);
-    if (!b || !joins_metric(p)) return py::none();
-    CArray<double> wa, wb;
-    if (!weights.is_none()) wa = weights.cast<CArray<double>>();
-    if (!other_weights.is_none()) wb = other_weights.cast<CArray<double>>();
-    const double* wap = weights.is_none() ? nullptr : values_of(wa, static_cast<std::size_t>(n_rows_), "weights");
-    const double* wbp =
-        other_weights.is_none() ? nullptr : values_of(wb, static_cast<std::size_t>(b->n_rows_), "weights");
-    const std::vector<double> r(radii.data(), radii.data() + radii.size());
-    auto first = with_metric(p);
-    auto second = b->with_metric(p);
-    std::vector<double> counts(r.size());
-    bool joined = false;
-    {
-      py::gil_scoped_release unlocked;
-      joined = first->join_counts(*second, r, wap, wbp, join_params(), counts.data());
-    }
-    if (!joined) return py::none();
-    return take_vector(std::move(counts), {static_cast<py::ssize_t>(r.size())});
-  }
-
   /// Weighted or unweighted pair counts per bin (see Searcher::pair_histogram).
   py::array_t<double> pair_histogram(const CArray<T>& queries, py::object query_weights,
                                      const CArray<double>& radii, py::object point_weights, double p,
@@ -353,8 +327,6 @@ void bind_point_index(py::module_& m, const char* name) {
       .def("ball_pairs", &PointIndex<T>::ball_pairs, py::arg("queries"), py::arg("radius"), py::arg("p"),
            py::arg("threads"), py::arg("query_rows"), py::arg("after_query_row"))
       .def("join_pairs", &PointIndex<T>::join_pairs, py::arg("other"), py::arg("r"), py::arg("p"), py::arg("output"))
-      .def("join_counts", &PointIndex<T>::join_counts, py::arg("other"), py::arg("radii"), py::arg("weights"),
-           py::arg("other_weights"), py::arg("p"))
       .def("pair_histogram", &PointIndex<T>::pair_histogram, py::arg("queries"), py::arg("query_weights"),
            py::arg("radii"), py::arg("point_weights"), py::arg("p"), py::arg("threads"))
       .def("nodes", &PointIndex<T>::nodes)

@@ -2,9 +2,10 @@
 // k above the number of points, eps), points within a radius (lists, counts, distances) and pair
 // counts at many radii, optionally on a periodic box; batches spread over threads.
 //
-// The pair methods (pairs within a distance, sparse distance matrices, pair counts) go through the
-// library's dual-tree joins (kdspace/joins/joins.hpp) for p = 1, 2 and infinity; other p, and two
-// trees of different types, take the single-tree path (ball_matches, pair_histogram).
+// The pair methods (pairs within a distance, sparse distance matrices) go through the library's
+// dual-tree joins (kdspace/joins/joins.hpp) for p = 1, 2 and infinity; other p, and two trees of
+// different types, take the single-tree path (ball_matches). Pair counts stay on the single-tree
+// path (pair_histogram), measured faster than count_pairs up to ~100 pairs per point (README).
 //
 // Searcher<T> is what the Python layer holds: T is the scalar of the caller's queries and distances
 // (the data's, float32 or float64). TreeSearcher<Tree, T> implements it over one PointTree; its
@@ -85,18 +86,12 @@ class Searcher {
                               const std::vector<double>& radii, const double* point_weights,
                               const QueryOptions& options, double* bins) const = 0;
 
-  // The joins, for the metrics they serve (p = 1, 2, infinity) and a second tree of this one's type:
-  // each returns false, doing nothing, where they do not apply, and the caller takes the single-tree
-  // path. Radii are closed; a negative one holds no pair.
-
-  /// The pairs (this tree's row, other's row) within r, with distances if `distances`. Other null:
-  /// the pairs of this tree's distinct points, each once (first < second).
+  /// The pairs (this tree's row, other's row) within r (closed; r < 0: none), with distances if
+  /// `distances`, by a join; other null: the pairs of this tree's distinct points, each once
+  /// (first < second). False, doing nothing, where the joins do not apply (a metric they do not
+  /// serve, p not 1, 2 or infinity; other of another type): the caller takes the single-tree path.
   virtual bool join_pairs(const Searcher<T>* other, double r, bool distances, const JoinParams& params,
                           PairRows& out) const = 0;
-  /// counts[j]: the pairs (this tree's point, other's point) within radii[j], or the sum of
-  /// weights[row] * other_weights[row'] over them (by the caller's rows; null: weight 1).
-  virtual bool join_counts(const Searcher<T>& other, const std::vector<double>& radii, const double* weights,
-                           const double* other_weights, const JoinParams& params, double* counts) const = 0;
 
   /// The same tree searched with the Minkowski p-norm (1, 2, infinity or any p >= 1).
   virtual std::shared_ptr<const Searcher<T>> with_metric(double p) const = 0;
@@ -271,36 +266,6 @@ class TreeSearcher final : public Searcher<T> {
     }
   }
 
-  bool join_counts(const Searcher<T>& other, const std::vector<double>& radii, const double* weights,
-                   const double* other_weights, const JoinParams& params, double* counts) const override {
-    if constexpr (!joinable) {
-      return false;
-    } else {
-      const auto* b = dynamic_cast<const TreeSearcher*>(&other);
-      if (!b) return false;
-      std::vector<S> reach;          // the radii that can hold a pair (>= 0)
-      std::vector<std::size_t> slot;  // where each one's count goes
-      for (std::size_t j = 0; j < radii.size(); ++j) {
-        counts[j] = 0;
-        if (radii[j] >= 0) {
-          reach.push_back(radius_of(radii[j]));
-          slot.push_back(j);
-        }
-      }
-      if (reach.empty()) return true;
-      if (!weights && !other_weights) {
-        const std::vector<std::uint64_t> found = count_pairs(tree_, b->tree_, reach, params);
-        for (std::size_t i = 0; i < slot.size(); ++i) counts[slot[i]] = static_cast<double>(found[i]);
-      } else {
-        const std::vector<double> wa = by_index(weights, *map_, tree_.size()),
-                                  wb = by_index(other_weights, *b->map_, b->tree_.size());
-        const std::vector<double> found = count_weighted_pairs(tree_, b->tree_, reach, wa.data(), wb.data(), params);
-        for (std::size_t i = 0; i < slot.size(); ++i) counts[slot[i]] = found[i];
-      }
-      return true;
-    }
-  }
-
   std::shared_ptr<const Searcher<T>> with_metric(double p) const override {
     if (p == 2) return copy_into<S, L2>(L2{});
     if (p == 1) return copy_into<S, L1>(L1{});
@@ -364,14 +329,6 @@ class TreeSearcher final : public Searcher<T> {
   static S radius_of(double r) {
     return r < static_cast<double>(std::numeric_limits<S>::max()) ? static_cast<S>(r)
                                                                    : std::numeric_limits<S>::infinity();
-  }
-
-  // Weights by the caller's row (null: all 1) as weights by the tree's point index.
-  static std::vector<double> by_index(const double* by_row, const RowMap& map, std::size_t n) {
-    std::vector<double> out(n, 1.0);
-    if (by_row)
-      for (std::size_t i = 0; i < n; ++i) out[i] = by_row[map(static_cast<std::uint32_t>(i))];
-    return out;
   }
 
   template <class S2, class M>
