@@ -59,7 +59,8 @@ class PointIndex {
       // The joins take the box in T, where L may round down onto a point; such a tree keeps to the
       // single-tree path.
       for (std::size_t a = 0; a < dim; ++a)
-        if (size[a] > 0 && !(box_->hi[a] < static_cast<double>(static_cast<T>(size[a])))) join_box_ok_ = false;
+        if (size[a] > 0 && !(box_->hi[a] < static_cast<double>(static_cast<T>(size[a]))))
+          join_box_ok_ = false;
     }
     const T* data = rows.data();
     py::gil_scoped_release unlocked;
@@ -147,7 +148,8 @@ class PointIndex {
   /// (first, second, distance) or "lists" (for each of this set's rows, a list of other's rows,
   /// ascending).
   py::object join_pairs(py::object other, double r, double p, const std::string& output) {
-    if (output != "pairs" && output != "distances" && output != "lists") throw Error("unknown output " + output);
+    if (output != "pairs" && output != "distances" && output != "lists")
+      throw Error("unknown output " + output);
     if (!joins_metric(p) || !join_box_ok_) return py::none();
     PointIndex* b = nullptr;
     if (!other.is_none() && !(b = joinable_with(other, p))) return py::none();
@@ -162,9 +164,10 @@ class PointIndex {
     if (!joined) return py::none();
     if (output == "lists") return row_lists(pairs);
     const auto count = static_cast<py::ssize_t>(pairs.first.size());
-    py::array_t<RowId> a = take_vector(std::move(pairs.first), {count}), c = take_vector(std::move(pairs.second), {count});
-    if (output == "pairs") return py::make_tuple(a, c);
-    return py::make_tuple(a, c, take_vector(std::move(pairs.distance), {count}));
+    py::array_t<RowId> first_rows = take_vector(std::move(pairs.first), {count});
+    py::array_t<RowId> second_rows = take_vector(std::move(pairs.second), {count});
+    if (output == "pairs") return py::make_tuple(first_rows, second_rows);
+    return py::make_tuple(first_rows, second_rows, take_vector(std::move(pairs.distance), {count}));
   }
 
   /// Weighted or unweighted pair counts per bin (see Searcher::pair_histogram).
@@ -326,7 +329,8 @@ void bind_point_index(py::module_& m, const char* name) {
            py::arg("threads"), py::arg("sort_rows"))
       .def("ball_pairs", &PointIndex<T>::ball_pairs, py::arg("queries"), py::arg("radius"), py::arg("p"),
            py::arg("threads"), py::arg("query_rows"), py::arg("after_query_row"))
-      .def("join_pairs", &PointIndex<T>::join_pairs, py::arg("other"), py::arg("r"), py::arg("p"), py::arg("output"))
+      .def("join_pairs", &PointIndex<T>::join_pairs, py::arg("other"), py::arg("r"), py::arg("p"),
+           py::arg("output"))
       .def("pair_histogram", &PointIndex<T>::pair_histogram, py::arg("queries"), py::arg("query_weights"),
            py::arg("radii"), py::arg("point_weights"), py::arg("p"), py::arg("threads"))
       .def("nodes", &PointIndex<T>::nodes)

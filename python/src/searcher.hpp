@@ -256,8 +256,8 @@ class TreeSearcher final : public Searcher<T> {
           out.distance.push_back(static_cast<double>(f.distance));
         }
       } else {
-        const auto found =
-            b ? pairs_within(tree_, b->tree_, radius_of(r), params) : pairs_within(tree_, radius_of(r), params);
+        const auto found = b ? pairs_within(tree_, b->tree_, radius_of(r), params)
+                             : pairs_within(tree_, radius_of(r), params);
         out.first.reserve(found.size());
         out.second.reserve(found.size());
         for (const auto& f : found) put(f.a, f.b);
