@@ -113,10 +113,7 @@ PointTree<T, Dim, Metric> build_tree(const io::Matrix<T>& base, const SearchJob&
 }
 
 // Whether the batch goes through a dual-tree join (join_search.hpp).
-bool by_join(const SearchJob& job, std::size_t queries, std::size_t dim) {
-  const bool exact_knn = job.mode == Mode::knn && job.eps == 0;
-  return job.self || !job.boxsize.empty() || (exact_knn && join_is_faster(queries, dim));
-}
+bool by_join(const SearchJob& job) { return job.self || !job.boxsize.empty(); }
 
 // The joins of a compile-time-dimension tree are compiled in the library for L2 only
 // (KDSPACE_JOIN_INSTANCES in kdspace/joins/joins.hpp); run_search sends a join under L1 or Linf to
@@ -127,7 +124,7 @@ inline constexpr bool joins_compiled_for = Dim == Dynamic || std::is_same_v<Metr
 template <class T, int Dim, class Metric>
 NeighborLists<T> search(const PointTree<T, Dim, Metric>& tree, const io::Matrix<T>& queries,
                         const SearchJob& job, QueryStats& stats) {
-  if (by_join(job, queries.rows, tree.dim())) {
+  if (by_join(job)) {
     if constexpr (joins_compiled_for<Dim, Metric>) {
       JoinRequest request;
       request.knn = job.mode == Mode::knn;
@@ -186,7 +183,7 @@ int build_and_search(const SearchJob& job, Inputs<T>& in) {
         .add("dim", std::uint64_t{tree.dim()})
         .add("dim_known_at", Dim != Dynamic ? "compile time" : "run time")
         .add("queries", std::uint64_t{found.rows()});
-    json.add("method", by_join(job, queries.rows, tree.dim()) ? "dual-tree join" : "tree");
+    json.add("method", by_join(job) ? "dual-tree join" : "tree");
     if (job.self) json.add("self", "yes");
     if (!job.boxsize.empty()) json.add("boxsize", job.boxsize);
     if (job.mode == Mode::knn) {
@@ -217,7 +214,7 @@ template <class T, class Metric>
 int run_search(const SearchJob& job) {
   Inputs<T> in = read_inputs<T>(job);
   if constexpr (!std::is_same_v<Metric, L2>)  // a join under L1 or Linf: see joins_compiled_for
-    if (by_join(job, in.queries.rows, in.base.cols)) return build_and_search<T, Dynamic, Metric>(job, in);
+    if (by_join(job)) return build_and_search<T, Dynamic, Metric>(job, in);
   return with_tree_dimension(in.base.cols, [&](auto dim) {
     return build_and_search<T, decltype(dim)::value, Metric>(job, in);
   });
