@@ -13,6 +13,7 @@ packages=(
   libhnswlib-dev libfaiss-dev                                # approximate search peers (kdspace-ann-bench)
   libsndfile1-dev                                            # recordings for kdspace-ann-bench's MFCC
   libcgal-dev libopenblas-dev                                # kdspace-bench peers: CGAL Kd_tree, FAISS flat (OpenBLAS sgemm)
+  clang libclang-rt-14-dev                                   # fuzzing (libFuzzer): fuzz/
   gnuplot-nox                                                # benchmark plots
   pybind11-dev python3-dev python3-numpy                     # the Python module (python/)
   python3-scipy python3-pytest                               # its tests (SciPy's kd-tree tests run against it)

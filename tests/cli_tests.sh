@@ -516,6 +516,118 @@ cp p.pairs p-before.pairs
 expect_error "pairs: a failure keeps the earlier output" 1 "nan.csv" -- pairs --base base.csv --with nan.csv -r 1 --out p.pairs
 if cmp -s p.pairs p-before.pairs && ! ls ./*.tmp.* >/dev/null 2>&1; then pass "the earlier .pairs is intact, no temporary left"
 else fail "the earlier .pairs is intact, no temporary left" "$(ls)"; fi
+# ---- saved indexes (kdspace index, --index) ---------------------------------------------------------
+if expect_ok "index a csv base" index --base base.csv --out tree.kdx --stats; then
+  python3 -c 'import json; s = json.load(open("out.txt")); assert s["points"] == 40 and s["save_s"] >= 0 and s["file_bytes"] > 0, s' \
+    2>check.txt && pass "index --stats" || fail "index --stats" "$(cat check.txt)"
+fi
+if expect_ok "knn --index" knn --index tree.kdx --query query.csv -k 5 --out ids.ivecs --distances dist.fvecs; then
+  check_results "knn --index equals brute force" knn l2 5 base.csv query.csv
+  cp ids.ivecs index-ids.ivecs && cp dist.fvecs index-dist.fvecs
+  if expect_ok "knn building in the run" knn --base base.csv --query query.csv -k 5 --out ids.ivecs --distances dist.fvecs &&
+    cmp -s ids.ivecs index-ids.ivecs && cmp -s dist.fvecs index-dist.fvecs; then pass "knn --index writes what building in the run writes"
+  else fail "knn --index writes what building in the run writes" "outputs differ"; fi
+fi
+if expect_ok "index --metric l1 --leaf 2" index --base base.csv --out l1.kdx --metric l1 --leaf 2 &&
+  expect_ok "radius --index" radius --index l1.kdx --query query.csv -r 4 --out ids.ivecs --distances dist.fvecs --stats; then
+  check_results "radius --index (l1) equals brute force" radius l1 4 base.csv query.csv
+  python3 -c 'import json; s = json.load(open("out.txt")); assert s["load_s"] >= 0 and s["build_s"] == 0 and s["metric"] == "l1", s' \
+    2>check.txt && pass "--index --stats gives load_s" || fail "--index --stats gives load_s" "$(cat check.txt)"
+fi
+if expect_ok "index --forest" index --base base.npy --out forest.kdx --forest 3 --checks 40 --leaf 4 &&
+  expect_ok "knn --index of a forest" knn --index forest.kdx --query query.csv -k 5 --out ids.ivecs --distances dist.fvecs; then
+  check_results "knn --index of a forest searching all points equals brute force" knn l2 5 base.csv query.csv
+  cp ids.ivecs index-ids.ivecs
+  if expect_ok "knn --forest building in the run" knn --base base.npy --query query.csv -k 5 --out ids.ivecs \
+    --forest 3 --checks 12 --leaf 4 && expect_ok "knn --index of a forest, --checks 12" knn --index forest.kdx \
+    --query query.csv -k 5 --out index-ids.ivecs --checks 12 && cmp -s ids.ivecs index-ids.ivecs; then
+    pass "knn --index of a forest writes what building it in the run writes"
+  else fail "knn --index of a forest writes what building it in the run writes" "outputs differ"; fi
+fi
+if expect_ok "index --recall" index --base base.csv --out tuned.kdx --recall 0.95 -k 3 --stats; then
+  python3 -c 'import json; s = json.load(open("out.txt")); assert s["kind"] == "point forest" and s["checks"] >= 1 and s["tuning_recall"] >= 0.95, s' \
+    2>check.txt && pass "index --recall stores a tuned forest" || fail "index --recall stores a tuned forest" "$(cat check.txt)"
+fi
+# A forest index with its neighbour graph (8-D: --recall builds one), searched with the stored
+# setting and with --ef.
+python3 - <<'EOF'
+import random
+random.seed(3)
+for name, rows in (("base8.csv", 300), ("query8.csv", 20)):
+    with open(name, "w") as f:
+        for _ in range(rows):
+            f.write(",".join("%.3f" % random.uniform(0, 10) for _ in range(8)) + "\n")
+EOF
+if expect_ok "index --recall, 8-D (trees and graph)" index --base base8.csv --out graph.kdx --recall 0.9 -k 4 --stats; then
+  python3 -c 'import json; s = json.load(open("out.txt")); assert s["graph_degree"] == 32 and s["method"] in ("graph", "forest"), s' \
+    2>check.txt && pass "index --recall stores the graph" || fail "index --recall stores the graph" "$(cat check.txt)"
+  expect_ok "knn --index of a forest with a graph, stored setting" knn --index graph.kdx --query query8.csv -k 4 --out ids.ivecs
+  if expect_ok "knn --index --ef" knn --index graph.kdx --query query8.csv -k 4 --out ids.ivecs --distances dist.fvecs --ef 300 --stats; then
+    check_results "knn --index --ef n equals brute force" knn l2 4 base8.csv query8.csv
+  fi
+fi
+expect_error "--ef on a forest index without a graph" 2 "holds none" -- knn --index forest.kdx --query query.csv -k 3 --out ids.ivecs --ef 10
+expect_error "--graph with --index" 2 "applies when building" -- knn --index forest.kdx --query query.csv -k 3 --out ids.ivecs --graph
+# Updates: remove ids 0, 5, 6 and 39, add three points (ids 40, 41, 42), then compare with a brute
+# force over the points held, under their ids.
+python3 - <<'EOF'
+import struct
+with open("remove.ivecs", "wb") as f:
+    f.write(struct.pack("<i3i", 3, 0, 5, 6) + struct.pack("<i1i", 1, 39))
+with open("add.fvecs", "wb") as f:
+    for r in ([1, 1, 1], [8, 2, 5], [1, 1, 1]):
+        f.write(struct.pack("<i3f", 3, *r))
+with open("remove-unknown.ivecs", "wb") as f:
+    f.write(struct.pack("<i2i", 2, 1, 77))
+with open("add4.fvecs", "wb") as f:
+    f.write(struct.pack("<i4f", 4, 1, 2, 3, 4))
+EOF
+if expect_ok "index --update" index --update tree.kdx --add add.fvecs --remove remove.ivecs --out updated.kdx --stats; then
+  python3 -c 'import json; s = json.load(open("out.txt")); assert (s["points"], s["added"], s["removed"], s["first_id"], s["next_id"]) == (39, 3, 4, 40, 43), s' \
+    2>check.txt && pass "index --update --stats" || fail "index --update --stats" "$(cat check.txt)"
+  if expect_ok "knn --index after updates" knn --index updated.kdx --query query.csv -k 7 --out ids.ivecs; then
+    if python3 - <<'EOF' 2>check.txt; then pass "knn after updates equals brute force under the ids"; else fail "knn after updates equals brute force under the ids" "$(cat check.txt)"; fi
+import struct
+base = [[float(v) for v in l.split(",")] for l in open("base.csv") if l.strip() and not l[0].isalpha()]
+queries = [[float(v) for v in l.split(",")] for l in open("query.csv") if l.strip()]
+points = {i: p for i, p in enumerate(base) if i not in (0, 5, 6, 39)}
+points.update({40: [1, 1, 1], 41: [8, 2, 5], 42: [1, 1, 1]})
+data, at = open("ids.ivecs", "rb").read(), 0
+for q in queries:
+    (d,) = struct.unpack_from("<i", data, at)
+    got = list(struct.unpack_from("<%di" % d, data, at + 4))
+    at += 4 + 4 * d
+    want = [i for _, i in sorted((sum((a - b) ** 2 for a, b in zip(q, p)), i) for i, p in points.items())[:7]]
+    assert got == want, (q, got, want)
+EOF
+  fi
+  expect_error "knn --index after updates: k above the points held" 1 "k = 40" "updated.kdx holds 39" -- \
+    knn --index updated.kdx --query query.csv -k 40 --out ids.ivecs
+  expect_error "update: an id no longer held" 1 "remove.ivecs: row 1: id 0 is not in updated.kdx" -- \
+    index --update updated.kdx --remove remove.ivecs
+fi
+expect_error "update: an unknown id" 1 "remove-unknown.ivecs: row 1: id 77 is not in tree.kdx" -- \
+  index --update tree.kdx --remove remove-unknown.ivecs
+expect_error "update: added points of another dimension" 1 "add4.fvecs: dimension 4" "tree.kdx: dimension 3" -- \
+  index --update tree.kdx --add add4.fvecs
+expect_error "update: a forest" 1 "forest.kdx" "only point trees take updates" -- index --update forest.kdx --add add.fvecs
+expect_error "update: nothing to do" 2 "--add" -- index --update tree.kdx
+expect_error "update with --base" 2 "--base and --update" -- index --update tree.kdx --base base.csv --add add.fvecs
+expect_error "index: missing --out" 2 "--out" -- index --base base.csv
+expect_error "index: --checks without a forest" 2 "--checks" -- index --base base.csv --out x.kdx --checks 5
+expect_error "--index with --base" 2 "--base and --index" -- knn --index tree.kdx --base base.csv --query query.csv -k 3 --out ids.ivecs
+expect_error "--index with a build option" 2 "--leaf applies when building" -- \
+  knn --index tree.kdx --query query.csv -k 3 --out ids.ivecs --leaf 4
+expect_error "--checks on a tree index" 2 "--checks applies to forests" -- \
+  knn --index tree.kdx --query query.csv -k 3 --out ids.ivecs --checks 5
+expect_error "radius on a forest index" 1 "forest.kdx" "knn only" -- radius --index forest.kdx --query query.csv -r 1 --out ids.ivecs
+expect_error "--index: missing file" 1 "missing.kdx: cannot open" -- knn --index missing.kdx --query query.csv -k 3 --out ids.ivecs
+expect_error "--index: not an index" 1 "base.csv: not a kdspace index file" -- knn --index base.csv --query query.csv -k 3 --out ids.ivecs
+expect_error "--index: queries of another dimension" 1 "query4.csv: dimension 4" "tree.kdx: dimension 3" -- \
+  knn --index tree.kdx --query query4.csv -k 3 --out ids.ivecs
+python3 -c 'd = bytearray(open("tree.kdx", "rb").read()); d[len(d) // 2] ^= 4; open("damaged.kdx", "wb").write(d)'
+expect_error "--index: a damaged file" 1 "damaged.kdx: section" "checksum mismatch: the file is damaged" -- \
+  knn --index damaged.kdx --query query.csv -k 3 --out ids.ivecs
 
 # ---- help, version -------------------------------------------------------------------------------
 if expect_ok "--version" --version && grep -qE '^kdspace [0-9]+\.[0-9]+\.[0-9]+$' out.txt; then pass "--version prints kdspace X.Y.Z"
@@ -523,7 +635,7 @@ else fail "--version prints kdspace X.Y.Z" "stdout: $(cat out.txt)"; fi
 if expect_ok "--help" --help && grep -qF "kdspace knn" out.txt && grep -qF "kdspace radius" out.txt && grep -qF -- "-k 0" out.txt; then
   pass "--help prints the usage (with the rule for -k 0)"
 else fail "--help prints the usage (with the rule for -k 0)" "stdout: $(head -c 300 out.txt)"; fi
-for cmd in knn radius demo pairs count; do
+for cmd in knn radius demo pairs count index; do
   if expect_ok "$cmd --help" $cmd --help && grep -qF "usage: kdspace $cmd" out.txt; then pass "$cmd --help"
   else fail "$cmd --help" "stdout: $(head -c 300 out.txt)"; fi
 done

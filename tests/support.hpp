@@ -217,11 +217,15 @@ inline kdspace::Box3f box_of(float x0, float y0, float z0, float x1, float y1, f
 
 // ---- files (test_io.cpp, test_rays_io.cpp) ------------------------------------------------------
 
-/// A scratch directory for one test, removed afterwards: <temp>/<prefix><process id>.
+/// A scratch directory for one test, removed afterwards: <base>/<prefix><process id>, where base is
+/// the temporary directory, or (in_memory) /dev/shm where there is one: for tests that write many
+/// small files, which a disk file system may flush one by one.
 class ScratchDir {
  public:
-  explicit ScratchDir(const std::string& prefix)
-      : dir_(std::filesystem::temp_directory_path() / (prefix + std::to_string(::getpid()))) {
+  explicit ScratchDir(const std::string& prefix, bool in_memory = false)
+      : dir_((in_memory && std::filesystem::is_directory("/dev/shm") ? std::filesystem::path("/dev/shm")
+                                                                      : std::filesystem::temp_directory_path()) /
+             (prefix + std::to_string(::getpid()))) {
     std::filesystem::create_directories(dir_);
   }
   ~ScratchDir() {
@@ -232,6 +236,7 @@ class ScratchDir {
   ScratchDir& operator=(const ScratchDir&) = delete;
 
   std::string file(const std::string& name) const { return (dir_ / name).string(); }
+  std::string path() const { return dir_.string(); }
 
  private:
   std::filesystem::path dir_;

@@ -7,6 +7,7 @@
 #include "kdspace/points/brute_force.hpp"
 #include "kdspace/points/neighbor.hpp"
 #include "kdspace/points/params.hpp"
+#include "kdspace/points/dynamic_point_tree.hpp"
 #include "kdspace/points/point_forest.hpp"
 #include "kdspace/points/point_tree.hpp"
 #include "kdspace/boxes/box_tree.hpp"

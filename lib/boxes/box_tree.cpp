@@ -91,7 +91,38 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
   }
 
   const auto start = std::chrono::steady_clock::now();
-  boxes_.assign(boxes, boxes + n);
+  std::vector<Box3f> copy(boxes, boxes + n);
+  boxes_ = detail::Storage<Box3f>(copy);
+  compute_bounds();
+
+  const std::size_t max_depth = params.max_depth == 0 ? automatic_max_depth(n) : params.max_depth;
+  detail::TreeWriter out;
+  if (n == 0) {
+    out.add_leaf({}, 0);
+  } else {
+    switch (params.method) {
+      case BoxBuildMethod::median:
+        detail::build_median(copy, bounds_, params, max_depth, out);
+        break;
+      case BoxBuildMethod::sah:
+        detail::build_sah(copy, bounds_, params, max_depth, out);
+        break;
+      case BoxBuildMethod::sah_nlogn:
+        detail::build_sah_nlogn(copy, bounds_, params, max_depth, out);
+        break;
+    }
+  }
+  detail::TreeLayout layout = detail::lay_out(out, copy);
+  nodes_ = detail::Storage<BoxNode>(std::move(layout.nodes));
+  references_ = detail::Storage<std::uint32_t>(std::move(layout.references));
+  blocks_ = detail::Storage<LeafBlock>(std::move(layout.blocks));
+  stats_.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  stats_.depth = out.depth;
+  stats_.max_depth = max_depth;
+  compute_stats();
+}
+
+void BoxTree::compute_bounds() {
   for (int a = 0; a < 3; ++a) {
     bounds_.lo[a] = std::numeric_limits<float>::infinity();
     bounds_.hi[a] = -std::numeric_limits<float>::infinity();
@@ -104,32 +135,100 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
   for (int a = 0; a < 3; ++a)
     if (!(std::abs(bounds_.lo[a]) <= float_trace_limit && std::abs(bounds_.hi[a]) <= float_trace_limit))
       float_range_ = false;
+}
 
-  const std::size_t max_depth = params.max_depth == 0 ? automatic_max_depth(n) : params.max_depth;
-  detail::TreeWriter out;
-  if (n == 0) {
-    out.add_leaf({}, 0);
-  } else {
-    switch (params.method) {
-      case BoxBuildMethod::median:
-        detail::build_median(boxes_, bounds_, params, max_depth, out);
-        break;
-      case BoxBuildMethod::sah:
-        detail::build_sah(boxes_, bounds_, params, max_depth, out);
-        break;
-      case BoxBuildMethod::sah_nlogn:
-        detail::build_sah_nlogn(boxes_, bounds_, params, max_depth, out);
-        break;
-    }
+BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
+  auto fail = [](const std::string& what) { throw Error("box tree: " + what); };
+  try {
+    check_params(p.params);
+  } catch (const Error& e) {
+    fail(e.what());
   }
-  detail::TreeLayout layout = detail::lay_out(out, boxes_);
-  nodes_ = std::move(layout.nodes);
-  references_ = std::move(layout.references);
-  blocks_ = std::move(layout.blocks);
-  stats_.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  stats_.depth = out.depth;
-  stats_.max_depth = max_depth;
+  const std::size_t n = p.boxes.size();
+  if (n >= (std::size_t{1} << 30)) fail("too many boxes: " + std::to_string(n));
+  if (p.max_depth > max_box_tree_depth)
+    fail("depth cap " + std::to_string(p.max_depth) + " above " + std::to_string(max_box_tree_depth));
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::string problem = box_problem(p.boxes[i]);
+    if (!problem.empty()) fail("box " + std::to_string(i + 1) + ": " + problem);
+  }
+  const std::size_t refs = p.references.size();
+  if (p.nodes.size() >= (std::size_t{1} << 28) || refs >= (std::size_t{1} << 30))
+    fail("more than 2^28 nodes or 2^30 references");
+  if (refs % 4 != 0 || p.blocks.size() != refs / 4)
+    fail(std::to_string(refs) + " references and " + std::to_string(p.blocks.size()) +
+         " leaf blocks: one block per 4 references expected");
+  // Depth first, every node once (left child next to its parent, right child where the left subtree
+  // ends), leaf ranges tiling the references as the layout pads them (detail::lay_out), no leaf
+  // deeper than the traversal's stack allows.
+  struct Pending {
+    std::size_t id, parent, depth;
+  };
+  std::vector<Pending> stack{{0, 0, 0}};
+  std::vector<bool> referenced(n, false);
+  std::size_t next = 0, next_ref = 0, depth = 0;
+  while (!stack.empty()) {
+    const Pending at = stack.back();
+    stack.pop_back();
+    const std::string where = "node " + std::to_string(at.parent) + ": ";
+    if (at.id != next || next >= p.nodes.size())
+      fail(where + "child " + std::to_string(at.id) + ", expected " + std::to_string(next) + " (of " +
+           std::to_string(p.nodes.size()) + " nodes)");
+    if (at.depth > max_box_tree_depth) fail(where + "deeper than " + std::to_string(max_box_tree_depth));
+    const BoxNode& node = p.nodes[next++];
+    if (node.is_leaf()) {
+      const std::size_t count = node.count(), padded = (count + 3) / 4 * 4;
+      const std::string leaf = "leaf " + std::to_string(at.id) + ": ";
+      if (node.first() != next_ref || padded > refs - next_ref) fail(leaf + "references out of place");
+      const std::uint32_t* ids = p.references.data() + next_ref;
+      for (std::size_t i = 0; i < padded; ++i) {
+        const std::uint32_t id = ids[i];
+        if (id >= n) fail(leaf + "reference names box " + std::to_string(id) + " of " + std::to_string(n));
+        if (i < count ? i > 0 && id <= ids[i - 1] : id != ids[count - 1])
+          fail(leaf + (i < count ? "references not ascending" : "padding does not repeat the last reference"));
+        referenced[id] = true;
+        // The traversal tests a leaf's boxes from their copies in the blocks: each copy must be its box.
+        const LeafBlock& block = p.blocks[(next_ref + i) / 4];
+        const Box3f& b = p.boxes[id];
+        const std::size_t lane = i % 4;
+        for (int a = 0; a < 3; ++a)
+          if (!(block.plane[a][lane] == b.lo[a] && block.plane[3 + a][lane] == b.hi[a]))
+            fail(leaf + "leaf block " + std::to_string((next_ref + i) / 4) + " lane " + std::to_string(lane) +
+                 " differs from box " + std::to_string(id));
+      }
+      next_ref += padded;
+      depth = std::max(depth, at.depth);
+      continue;
+    }
+    if (!std::isfinite(node.split())) fail("node " + std::to_string(at.id) + ": split is not finite");
+    stack.push_back({node.right_child(), at.id, at.depth + 1});
+    stack.push_back({at.id + 1, at.id, at.depth + 1});
+  }
+  if (next != p.nodes.size() || next_ref != refs) fail("nodes or references not reached from the root");
+  // Every box meets the root cell (the union of the boxes), so some leaf holds it.
+  for (std::size_t i = 0; i < n; ++i)
+    if (!referenced[i]) fail("box " + std::to_string(i + 1) + " is in no leaf");
+  boxes_ = std::move(p.boxes);
+  nodes_ = std::move(p.nodes);
+  references_ = std::move(p.references);
+  blocks_ = std::move(p.blocks);
+  backing_ = std::move(p.backing);
+  compute_bounds();
+  stats_.depth = depth;
+  stats_.max_depth = p.max_depth;
   compute_stats();
+}
+
+BoxTreeParts BoxTree::parts() const {
+  BoxTreeParts p;
+  p.params = params_;
+  p.max_depth = stats_.max_depth;
+  p.boxes = detail::Storage<Box3f>::borrow(boxes_.data(), boxes_.size());
+  p.nodes = detail::Storage<BoxNode>::borrow(nodes_.data(), nodes_.size());
+  p.references = detail::Storage<std::uint32_t>::borrow(references_.data(), references_.size());
+  p.blocks = detail::Storage<LeafBlock>::borrow(blocks_.data(), blocks_.size());
+  p.backing = backing_;
+  return p;
 }
 
 void BoxTree::compute_stats() {

@@ -1,6 +1,7 @@
-// `kdspace knn` and `kdspace radius`: read a base and a query file, build a PointTree, search, write
-// the ids (and distances) of the results. Both commands share one implementation; they differ only
-// in their options (search_job.hpp, shared with kdspace-mpi) and in the batch query they run.
+// `kdspace knn` and `kdspace radius`: read a base and a query file, build a PointTree (or load a
+// saved index), search, write the ids (and distances) of the results. Both commands share one
+// implementation; they differ only in their options (search_job.hpp, shared with kdspace-mpi) and
+// in the batch query they run.
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -16,6 +17,7 @@
 #include "guard.hpp"
 #include "json.hpp"
 #include "kdspace/error.hpp"
+#include "kdspace/io/index.hpp"
 #include "kdspace/io/vectors.hpp"
 #include "kdspace/metric.hpp"
 #include "kdspace/points/detail/parallel.hpp"
@@ -103,6 +105,28 @@ Inputs<T, B> read_inputs(const SearchJob& job) {
   return in;
 }
 
+
+// The trees a dual-tree join takes: PointTrees of the metrics it has rules for (not Minkowski of
+// another order, which only a loaded index brings here; not a DynamicPointTree).
+template <class Tree>
+struct has_joins : std::false_type {};
+template <class T, int Dim, class Metric>
+struct has_joins<PointTree<T, Dim, Metric>> : std::bool_constant<!std::is_same_v<Metric, Minkowski>> {};
+
+// The joins of a compile-time-dimension tree are compiled in the library for L2 only
+// (KDSPACE_JOIN_INSTANCES in kdspace/joins/joins.hpp); run_search sends a join under L1 or Linf to
+// the run-time-dimension tree, so that the command does not compile the joins again.
+template <class Tree>
+inline constexpr bool joins_compiled_for = false;
+template <class T, int Dim, class Metric>
+inline constexpr bool joins_compiled_for<PointTree<T, Dim, Metric>> =
+    has_joins<PointTree<T, Dim, Metric>>::value && (Dim == Dynamic || std::is_same_v<Metric, L2>);
+
+template <class Tree>
+inline constexpr bool dim_known_at_compile_time = false;
+template <class T, int Dim, class Metric>
+inline constexpr bool dim_known_at_compile_time<PointTree<T, Dim, Metric>> = Dim != Dynamic;
+
 template <class T, int Dim, class Metric>
 PointTree<T, Dim, Metric> build_tree(const io::Matrix<T>& base, const SearchJob& job) {
   try {
@@ -112,20 +136,21 @@ PointTree<T, Dim, Metric> build_tree(const io::Matrix<T>& base, const SearchJob&
   }
 }
 
-// Whether the batch goes through a dual-tree join (join_search.hpp).
-bool by_join(const SearchJob& job) { return job.self || !job.boxsize.empty(); }
+// Whether the job asks for a dual-tree join (join_search.hpp): --self and --boxsize, which a single
+// tree does not answer.
+bool wants_join(const SearchJob& job) { return job.self || !job.boxsize.empty(); }
 
-// The joins of a compile-time-dimension tree are compiled in the library for L2 only
-// (KDSPACE_JOIN_INSTANCES in kdspace/joins/joins.hpp); run_search sends a join under L1 or Linf to
-// the run-time-dimension tree, so that the command does not compile the joins again.
-template <int Dim, class Metric>
-inline constexpr bool joins_compiled_for = Dim == Dynamic || std::is_same_v<Metric, L2>;
+// Whether the batch goes through a dual-tree join: asked for, and a tree that has them.
+template <class Tree>
+bool by_join(const SearchJob& job) {
+  return has_joins<Tree>::value && wants_join(job);
+}
 
-template <class T, int Dim, class Metric>
-NeighborLists<T> search(const PointTree<T, Dim, Metric>& tree, const io::Matrix<T>& queries,
-                        const SearchJob& job, QueryStats& stats) {
-  if (by_join(job)) {
-    if constexpr (joins_compiled_for<Dim, Metric>) {
+// Tree: a PointTree or a DynamicPointTree (the same queries).
+template <class T, class Tree>
+NeighborLists<T> search(const Tree& tree, const io::Matrix<T>& queries, const SearchJob& job, QueryStats& stats) {
+  if (by_join<Tree>(job)) {
+    if constexpr (joins_compiled_for<Tree>) {
       JoinRequest request;
       request.knn = job.mode == Mode::knn;
       request.k = job.k;
@@ -152,23 +177,22 @@ NeighborLists<T> search(const PointTree<T, Dim, Metric>& tree, const io::Matrix<
   }
 }
 
-// Build, search, write; Dim: the tree's dimension (tree_dimension.hpp), as a constant or Dynamic.
-template <class T, int Dim, class Metric>
-int build_and_search(const SearchJob& job, Inputs<T>& in) {
-  io::Matrix<T>& base = in.base;
-  const io::Matrix<T>& queries = in.queries;
+/// How the index searched came to be: built in the run (build_s), or loaded (load_s).
+struct Origin {
+  double build_s = 0;
+  double load_s = -1;  // < 0: not loaded
+  void add_to(JsonObject& json) const {
+    json.add("build_s", build_s);
+    if (load_s >= 0) json.add("load_s", load_s);
+  }
+};
 
-  Progress build_progress("building the tree", Progress::Kind::elapsed);
-  Clock::time_point start = Clock::now();
-  const PointTree<T, Dim, Metric> tree = build_tree<T, Dim, Metric>(base, job);
-  const double build_s = seconds_since(start);
-  build_progress.finish();
-  const std::size_t points = base.rows;
-  base = {};  // the tree holds its own copy
-
+// Searches a built or loaded tree, writes the results, prints --stats.
+template <class T, class Metric, class Tree>
+int search_tree(const SearchJob& job, const Tree& tree, const io::Matrix<T>& queries, const Origin& origin) {
   QueryStats stats;
   Progress search_progress("searching", Progress::Kind::elapsed);
-  start = Clock::now();
+  const Clock::time_point start = Clock::now();
   const NeighborLists<T> found = search(tree, queries, job, stats);
   const double query_s = seconds_since(start);
   search_progress.finish();
@@ -179,11 +203,11 @@ int build_and_search(const SearchJob& job, Inputs<T>& in) {
     const double nq = static_cast<double>(found.rows());
     JsonObject json;
     json.add("command", job.mode == Mode::knn ? "knn" : "radius")
-        .add("points", std::uint64_t{points})
+        .add("points", std::uint64_t{tree.size()})
         .add("dim", std::uint64_t{tree.dim()})
-        .add("dim_known_at", Dim != Dynamic ? "compile time" : "run time")
+        .add("dim_known_at", dim_known_at_compile_time<Tree> ? "compile time" : "run time")
         .add("queries", std::uint64_t{found.rows()});
-    json.add("method", by_join(job) ? "dual-tree join" : "tree");
+    json.add("method", by_join<Tree>(job) ? "dual-tree join" : "tree");
     if (job.self) json.add("self", "yes");
     if (!job.boxsize.empty()) json.add("boxsize", job.boxsize);
     if (job.mode == Mode::knn) {
@@ -195,9 +219,9 @@ int build_and_search(const SearchJob& job, Inputs<T>& in) {
     }
     json.add("metric", Metric::name)
         .add("scalar", sizeof(T) == sizeof(double) ? "double" : "float")
-        .add("threads", detail::resolve_threads(job.threads))
-        .add("build_s", build_s)
-        .add("query_s", query_s)
+        .add("threads", detail::resolve_threads(job.threads));
+    origin.add_to(json);
+    json.add("query_s", query_s)
         .add("queries_per_s", query_s > 0 ? nq / query_s : std::numeric_limits<double>::infinity())
         .add("depth", std::uint64_t{tree.depth()})
         .add("leaves", std::uint64_t{tree.leaf_count()})
@@ -210,14 +234,114 @@ int build_and_search(const SearchJob& job, Inputs<T>& in) {
   return 0;
 }
 
+
+// Build, search, write; Dim: the tree's dimension (tree_dimension.hpp), as a constant or Dynamic.
+template <class T, int Dim, class Metric>
+int build_and_search(const SearchJob& job, Inputs<T>& in) {
+  io::Matrix<T>& base = in.base;
+  Progress build_progress("building the tree", Progress::Kind::elapsed);
+  const Clock::time_point start = Clock::now();
+  const PointTree<T, Dim, Metric> tree = build_tree<T, Dim, Metric>(base, job);
+  Origin origin;
+  origin.build_s = seconds_since(start);
+  build_progress.finish();
+  base = {};  // the tree holds its own copy
+  return search_tree<T, Metric>(job, tree, in.queries, origin);
+}
+
 template <class T, class Metric>
 int run_search(const SearchJob& job) {
   Inputs<T> in = read_inputs<T>(job);
   if constexpr (!std::is_same_v<Metric, L2>)  // a join under L1 or Linf: see joins_compiled_for
-    if (by_join(job)) return build_and_search<T, Dynamic, Metric>(job, in);
+    if (wants_join(job)) return build_and_search<T, Dynamic, Metric>(job, in);
   return with_tree_dimension(in.base.cols, [&](auto dim) {
     return build_and_search<T, decltype(dim)::value, Metric>(job, in);
   });
+}
+
+// Searches a built or loaded forest, writes the results, prints --stats (with the recall measured
+// on a sample of the queries).
+template <class T>
+int search_forest(const SearchJob& job, const PointForest<T>& forest, const io::Matrix<T>& queries,
+                  const ForestSearchParams& search_params, const Origin& origin, const ForestTuning* tuning) {
+  QueryStats stats;
+  Progress search_progress("searching", Progress::Kind::elapsed);
+  Clock::time_point start = Clock::now();
+  NeighborLists<T> found;
+  try {
+    found = forest.knn_batch(queries.data.data(), queries.rows, job.k, search_params, job.threads, &stats);
+  } catch (const Error& e) {
+    throw in_query_file(e, job);
+  }
+  const double query_s = seconds_since(start);
+  search_progress.finish();
+
+  write_results(found, job);
+
+  if (job.stats) {
+    // Recall on up to 200 evenly spaced queries, against exact answers (not part of query_s).
+    const std::size_t sample = std::min<std::size_t>(queries.rows, 200);
+    start = Clock::now();
+    std::vector<T> picked(sample * queries.cols);
+    NeighborLists<T> picked_found;
+    picked_found.offsets.resize(sample + 1);
+    for (std::size_t i = 0; i < sample; ++i) {
+      const std::size_t q = i * queries.rows / sample;
+      std::copy(queries.data.begin() + static_cast<std::ptrdiff_t>(q * queries.cols),
+                queries.data.begin() + static_cast<std::ptrdiff_t>((q + 1) * queries.cols),
+                picked.begin() + static_cast<std::ptrdiff_t>(i * queries.cols));
+      for (const auto& nb : found.row(q)) picked_found.neighbors.push_back(nb);
+      picked_found.offsets[i + 1] = picked_found.neighbors.size();
+    }
+    const NeighborLists<T> exact = forest.knn_exact_batch(picked.data(), sample, job.k, job.threads);
+    const double recall = recall_at_k(picked_found, exact);
+    const double recall_check_s = seconds_since(start);
+
+    const double nq = static_cast<double>(queries.rows);
+    JsonObject json;
+    const bool graph_search = search_params.ef > 0;
+    json.add("command", "knn")
+        .add("method", graph_search ? "graph" : "forest")
+        .add("points", std::uint64_t{forest.size()})
+        .add("dim", std::uint64_t{forest.dim()})
+        .add("queries", std::uint64_t{queries.rows})
+        .add("k", std::uint64_t{job.k})
+        .add("metric", "l2")
+        .add("scalar", sizeof(T) == sizeof(double) ? "double" : "float")
+        .add("threads", detail::resolve_threads(job.threads))
+        .add("trees_built", std::uint64_t{forest.tree_count()})
+        .add("projected_dims", std::uint64_t{forest.projected_dims()})
+        .add("stored_as", forest.compact() ? "bytes" : (sizeof(T) == sizeof(double) ? "double" : "float"));
+    if (forest.has_graph())
+      json.add("graph_degree", std::uint64_t{forest.graph_degree()}).add("graph_build_s", forest.graph_build_seconds());
+    if (graph_search) {
+      json.add("ef", std::uint64_t{search_params.ef});
+    } else {
+      json.add("trees", std::uint64_t{search_params.trees == 0 ? forest.tree_count() : search_params.trees})
+          .add("checks", std::uint64_t{search_params.checks});
+    }
+    origin.add_to(json);
+    if (tuning) {
+      json.add("target_recall", job.recall)
+          .add("tune_s", tuning->seconds)
+          .add("tuning_recall", tuning->tuning_recall)
+          .add("validation_recall", tuning->validation_recall)
+          .add("settings_tried", std::uint64_t{tuning->settings_tried});
+    }
+    json.add("query_s", query_s)
+        .add("queries_per_s", query_s > 0 ? nq / query_s : std::numeric_limits<double>::infinity())
+        .add("recall", recall)
+        .add("recall_queries", std::uint64_t{sample})
+        .add("recall_check_s", recall_check_s)
+        .add("depth", std::uint64_t{forest.depth()})
+        .add("leaves", std::uint64_t{forest.leaf_count()})
+        .add("nodes", std::uint64_t{forest.node_count()})
+        .add("index_bytes", std::uint64_t{forest.index_bytes()})
+        .add("nodes_visited_per_query", static_cast<double>(stats.nodes_visited) / nq)
+        .add("points_visited_per_query", static_cast<double>(stats.points_visited) / nq);
+    std::printf("%s\n", json.str().c_str());
+  }
+  return 0;
 }
 
 // The forest's counterpart of run_search: build (and tune), search, write, and measure the recall on
@@ -242,9 +366,9 @@ int run_forest_search(const SearchJob& job) {
   } catch (const Error& e) {
     throw in_base_file(e, job);
   }
-  const double build_s = seconds_since(start);
+  Origin origin;
+  origin.build_s = seconds_since(start);
   build_progress.finish();
-  const std::size_t points = base.rows;
   base = {};
 
   ForestSearchParams search_params = job.use_trees ? ForestSearchParams{job.checks, 0, 0}
@@ -265,84 +389,93 @@ int run_forest_search(const SearchJob& job) {
     search_params = tuning.search();
   }
 
-  QueryStats stats;
-  Progress search_progress("searching", Progress::Kind::elapsed);
-  start = Clock::now();
-  NeighborLists<T> found;
-  try {
-    found = forest->knn_batch(queries.data.data(), queries.rows, job.k, search_params, job.threads, &stats);
-  } catch (const Error& e) {
-    throw in_query_file(e, job);
+  return search_forest(job, *forest, queries, search_params, origin, job.recall > 0 ? &tuning : nullptr);
+}
+
+// ---- answering from a saved index -------------------------------------------------------------------
+
+// The queries, checked against the index's dimension and size.
+template <class T>
+io::Matrix<T> read_queries_for_index(const SearchJob& job, std::size_t dim, std::size_t points) {
+  io::Matrix<T> queries = read_with_progress<T>(job.query);
+  if (queries.cols != dim)
+    throw Error(job.query + ": dimension " + std::to_string(queries.cols) + " does not match the index (" + job.index +
+                ": dimension " + std::to_string(dim) + ")");
+  if (job.mode == Mode::knn && job.k > points)
+    throw Error("k = " + std::to_string(job.k) + " exceeds the number of indexed points (" + job.index + " holds " +
+                std::to_string(points) + ")");
+  return queries;
+}
+
+// Loads the tree of `file` (a PointTree or a DynamicPointTree) and searches it.
+template <class T, class Metric>
+int search_tree_index(const SearchJob& job, const std::shared_ptr<const io::IndexFile>& file,
+                      Clock::time_point start) {
+  if (job.checks > 0 || job.ef > 0)
+    throw UsageError(std::string(job.checks > 0 ? "--checks" : "--ef") + " applies to forests; " + job.index +
+                     " holds a point tree");
+  auto load_and_search = [&](auto load) {
+    Progress progress("loading " + job.index, Progress::Kind::elapsed);
+    const auto tree = io::load_with_checksums(file, load);
+    Origin origin;
+    origin.load_s = seconds_since(start);
+    progress.finish();
+    const io::Matrix<T> queries = read_queries_for_index<T>(job, tree.dim(), tree.size());
+    return search_tree<T, Metric>(job, tree, queries, origin);
+  };
+  if (file->info().kind == io::IndexKind::point_tree)
+    return load_and_search([](const auto& f) { return io::load_point_tree<T, Dynamic, Metric>(f); });
+  return load_and_search([](const auto& f) { return io::load_dynamic_point_tree<T, Dynamic, Metric>(f); });
+}
+
+template <class T>
+int search_forest_index(const SearchJob& job, const std::shared_ptr<const io::IndexFile>& file,
+                        Clock::time_point start) {
+  if (job.mode != Mode::knn) throw Error(job.index + ": holds a point forest, which answers knn only");
+  if (job.eps > 0) throw UsageError("--eps applies to trees; " + job.index + " holds a point forest (use --checks)");
+  Progress progress("loading " + job.index, Progress::Kind::elapsed);
+  ForestSearchParams stored;
+  const PointForest<T> forest =
+      io::load_with_checksums(file, [&](const auto& f) { return io::load_point_forest<T>(f, &stored); });
+  Origin origin;
+  origin.load_s = seconds_since(start);
+  progress.finish();
+  ForestSearchParams search = stored.checks > 0 || stored.ef > 0 ? stored : ForestSearchParams{};
+  if (job.checks > 0) search = ForestSearchParams{job.checks, 0, 0};
+  if (job.ef > 0) {
+    if (!forest.has_graph()) throw UsageError("--ef searches a neighbour graph; " + job.index + " holds none (use --checks)");
+    search = ForestSearchParams{unlimited_checks, 0, job.ef};
   }
-  const double query_s = seconds_since(start);
-  search_progress.finish();
+  const io::Matrix<T> queries = read_queries_for_index<T>(job, forest.dim(), forest.size());
+  return search_forest(job, forest, queries, search, origin, nullptr);
+}
 
-  write_results(found, job);
-
-  if (job.stats) {
-    // Recall on up to 200 evenly spaced queries, against exact answers (not part of query_s).
-    const std::size_t sample = std::min<std::size_t>(queries.rows, 200);
-    start = Clock::now();
-    std::vector<T> picked(sample * queries.cols);
-    NeighborLists<T> picked_found;
-    picked_found.offsets.resize(sample + 1);
-    for (std::size_t i = 0; i < sample; ++i) {
-      const std::size_t q = i * queries.rows / sample;
-      std::copy(queries.data.begin() + static_cast<std::ptrdiff_t>(q * queries.cols),
-                queries.data.begin() + static_cast<std::ptrdiff_t>((q + 1) * queries.cols),
-                picked.begin() + static_cast<std::ptrdiff_t>(i * queries.cols));
-      for (const auto& nb : found.row(q)) picked_found.neighbors.push_back(nb);
-      picked_found.offsets[i + 1] = picked_found.neighbors.size();
-    }
-    const NeighborLists<T> exact = forest->knn_exact_batch(picked.data(), sample, job.k, job.threads);
-    const double recall = recall_at_k(picked_found, exact);
-    const double recall_check_s = seconds_since(start);
-
-    const double nq = static_cast<double>(queries.rows);
-    JsonObject json;
-    const bool graph_search = search_params.ef > 0;
-    json.add("command", "knn")
-        .add("method", graph_search ? "graph" : "forest")
-        .add("points", std::uint64_t{points})
-        .add("dim", std::uint64_t{forest->dim()})
-        .add("queries", std::uint64_t{queries.rows})
-        .add("k", std::uint64_t{job.k})
-        .add("metric", "l2")
-        .add("scalar", sizeof(T) == sizeof(double) ? "double" : "float")
-        .add("threads", detail::resolve_threads(job.threads))
-        .add("trees_built", std::uint64_t{forest->tree_count()})
-        .add("projected_dims", std::uint64_t{forest->projected_dims()})
-        .add("stored_as", forest->compact() ? "bytes" : (sizeof(T) == sizeof(double) ? "double" : "float"));
-    if (forest->has_graph())
-      json.add("graph_degree", std::uint64_t{forest->graph_degree()}).add("graph_build_s", forest->graph_build_seconds());
-    if (graph_search) {
-      json.add("ef", std::uint64_t{search_params.ef});
-    } else {
-      json.add("trees", std::uint64_t{search_params.trees == 0 ? forest->tree_count() : search_params.trees})
-          .add("checks", std::uint64_t{search_params.checks});
-    }
-    json.add("build_s", build_s);
-    if (job.recall > 0) {
-      json.add("target_recall", job.recall)
-          .add("tune_s", tuning.seconds)
-          .add("tuning_recall", tuning.tuning_recall)
-          .add("validation_recall", tuning.validation_recall)
-          .add("settings_tried", std::uint64_t{tuning.settings_tried});
-    }
-    json.add("query_s", query_s)
-        .add("queries_per_s", query_s > 0 ? nq / query_s : std::numeric_limits<double>::infinity())
-        .add("recall", recall)
-        .add("recall_queries", std::uint64_t{sample})
-        .add("recall_check_s", recall_check_s)
-        .add("depth", std::uint64_t{forest->depth()})
-        .add("leaves", std::uint64_t{forest->leaf_count()})
-        .add("nodes", std::uint64_t{forest->node_count()})
-        .add("index_bytes", std::uint64_t{forest->index_bytes()})
-        .add("nodes_visited_per_query", static_cast<double>(stats.nodes_visited) / nq)
-        .add("points_visited_per_query", static_cast<double>(stats.points_visited) / nq);
-    std::printf("%s\n", json.str().c_str());
+int search_index(const SearchJob& job) {
+  const Clock::time_point start = Clock::now();
+  const auto file = io::IndexFile::open(job.index, io::LoadMode::map, io::Checksums::deferred);
+  io::format_from_path(job.query);  // an unknown extension fails before the index is checked
+  const io::IndexInfo& info = file->info();
+  const bool wide = info.scalar == io::ScalarType::float64;
+  switch (info.kind) {
+    case io::IndexKind::point_tree:
+    case io::IndexKind::dynamic_point_tree:
+      switch (info.metric) {
+        case io::MetricId::l1:
+          return wide ? search_tree_index<double, L1>(job, file, start) : search_tree_index<float, L1>(job, file, start);
+        case io::MetricId::linf:
+          return wide ? search_tree_index<double, Linf>(job, file, start)
+                      : search_tree_index<float, Linf>(job, file, start);
+        case io::MetricId::minkowski:
+          return wide ? search_tree_index<double, Minkowski>(job, file, start)
+                      : search_tree_index<float, Minkowski>(job, file, start);
+        default:
+          return wide ? search_tree_index<double, L2>(job, file, start) : search_tree_index<float, L2>(job, file, start);
+      }
+    case io::IndexKind::point_forest:
+      return wide ? search_forest_index<double>(job, file, start) : search_forest_index<float>(job, file, start);
+    default:
+      throw Error(job.index + ": holds a " + io::name_of(info.kind) + ", not an index of points");
   }
-  return 0;
 }
 
 template <class T>
@@ -369,6 +502,7 @@ int run_search_command(Mode mode, const std::vector<std::string>& args) {
       return 0;
     }
     const SearchJob job = parse_job(mode, args);
+    if (!job.index.empty()) return search_index(job);
     // An unknown extension fails now, not after reading the base.
     io::format_from_path(job.base);
     if (!job.self) io::format_from_path(job.query);
@@ -393,3 +527,4 @@ int run_knn_command(const std::vector<std::string>& args) {
 int run_radius_command(const std::vector<std::string>& args) {
   return kdspace::cli::run_search_command(kdspace::cli::Mode::radius, args);
 }
+

@@ -14,6 +14,9 @@ const char* const usage =
 
 kdspace knn    --base FILE --query FILE -k K  --out IDS.ivecs [--distances D.fvecs] [build options] [--eps E] [--threads T] [--stats]
 kdspace radius --base FILE --query FILE -r R  --out IDS.ivecs [--distances D.fvecs] [--max-results M] [build options] [--threads T] [--stats]
+kdspace index  --base FILE --out INDEX.kdx [build options | --forest T [--checks C] | --recall R [-k K]] [--stats]
+kdspace index  --update INDEX.kdx [--add FILE] [--remove IDS.ivecs] [--out NEW.kdx] [--stats]
+kdspace knn|radius --index INDEX.kdx --query FILE ...   answers from a saved index (memory-mapped)
 kdspace rays   --boxes FILE --rays FILE --out HITS.bin [--build median|sah|sah-nlogn] [--threads T] [--stats]
 kdspace render --boxes FILE --out IMAGE.png [--width W] [--height H]
 kdspace pairs  --base A [--with B] -r R --out PAIRS.pairs [--metric M] [--boxsize L1,L2,...] [--threads T] [--stats]
@@ -53,6 +56,7 @@ int dispatch(const std::string& command, const std::vector<std::string>& args) {
   if (command == "render") return run_render_command(args);
   if (command == "pairs") return run_pairs_command(args);
   if (command == "count") return run_count_command(args);
+  if (command == "index") return run_index_command(args);
   return -1;
 }
 

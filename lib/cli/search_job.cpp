@@ -2,6 +2,7 @@
 
 #include <string>
 
+#include "build_options.hpp"
 #include "kdspace/points/point_forest.hpp"
 #include "options.hpp"
 
@@ -37,10 +38,12 @@ base is kept as bytes, a quarter of the memory):
                        with --forest T: the trees only (T of them); with --graph: the graph only
   --forest T           T randomized kd-trees (1..1024) searched together, best bin first
   --checks C           with --forest: points scored per query (default 256); more is slower and
-                       finds more of the true neighbours
+                       finds more of the true neighbours; with the --index of a forest, instead of
+                       the setting stored in it
   --graph              the neighbour graph, searched best first from the leaf of a kd-tree
   --ef E               with --graph: the best E points found are kept while searching (default
-                       64, at least K); more is slower and finds more of the true neighbours
+                       64, at least K); more is slower and finds more of the true neighbours;
+                       with the --index of a forest with a graph, instead of the setting stored in it
   --degree D           with --graph or --recall: neighbours a point keeps in the graph (2..1024,
                        default 32)
                        With --recall, --forest or --graph, --stats adds method (graph or forest),
@@ -65,25 +68,28 @@ const char* const files_usage = R"(  --base FILE          the points searched
   --distances D.fvecs  the true distances of those points (Euclidean for l2, not squared)
 )";
 
-const char* const stats_and_build_usage =
+const char* const index_usage =
+    R"(  --index INDEX.kdx    or a saved index of them (kdspace index), memory-mapped: the same answers as
+                       building it in the run (ids after updates: those kdspace index gave); its
+                       build options and metric are those it was saved with
+)";
+
+const char* const stats_usage =
     R"(  --stats              one JSON object on stdout: build_s, query_s, queries_per_s, threads, depth,
                        leaves, nodes_visited_per_query, points_visited_per_query, points, dim,
                        queries, k or radius, metric, index_bytes (times without file I/O)
-build options:
-  --axis cycle|spread               split axis (default spread: the axis of largest spread)
-  --position midpoint|median|middle|sliding
-                                    split position (default midpoint: the middle of the node's
-                                    points' extent)
-  --leaf N                          at most N points a leaf (default 24)
-  --max-depth D                     0..256 (default 64)
-  --metric l2|l1|linf               (default l2)
-Exit codes: 0 success, 2 usage error, 1 bad data or I/O error.
+)";
+
+const char* const index_stats_usage =
+    R"(                       with --index, load_s (mapping and checking the index) and build_s 0
 )";
 
 std::vector<OptionSpec> option_specs(Mode mode, const SearchCommand& command) {
-  std::vector<OptionSpec> specs = {{"--base"},   {"--query"},    {"--out"},         {"--distances"},
-                                   {"--axis"},   {"--position"}, {"--leaf"},        {"--max-depth"},
-                                   {"--metric"}, {"--threads"},  {"--stats", false}};
+  std::vector<OptionSpec> specs = {{"--base"},        {"--index", true, command.index_refused_because},
+                                   {"--query"},       {"--out"},
+                                   {"--distances"},   {"--threads"},
+                                   {"--stats", false}};
+  for (const OptionSpec& build : build_option_specs()) specs.push_back(build);
   specs.push_back({"--boxsize", true, command.joins_refused_because});
   if (mode == Mode::knn) {
     specs.push_back({"--self", false, command.joins_refused_because});
@@ -149,6 +155,12 @@ std::string search_usage(Mode mode, const SearchCommand& command) {
   else
     text += " ";
   text += "[--threads T] [--stats]\n";
+  const bool index = command.index_refused_because.empty();
+  if (index)
+    text += "       " + command.program +
+            (mode == Mode::knn
+                 ? " knn --index INDEX.kdx --query FILE -k K --out IDS.ivecs [--eps E | --checks C] ...\n"
+                 : " radius --index INDEX.kdx --query FILE -r R --out IDS.ivecs ...\n");
   if (mode == Mode::knn) {
     text += knn_about;
     if (joins) text += self_usage;
@@ -158,8 +170,12 @@ std::string search_usage(Mode mode, const SearchCommand& command) {
   }
   text += files_usage;
   if (joins) text += boxsize_usage;
+  if (index) text += index_usage;
   text += "  --threads T          " + command.threads_help + "\n";
-  text += stats_and_build_usage;
+  text += stats_usage;
+  if (index) text += index_stats_usage;
+  text += build_options_usage;
+  text += "Exit codes: 0 success, 2 usage error, 1 bad data or I/O error.\n";
   return text;
 }
 
@@ -168,8 +184,21 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
   constexpr std::size_t no_limit = std::numeric_limits<std::size_t>::max();
   SearchJob job;
   job.mode = mode;
-  job.base = o.required("--base");
   job.self = o.has("--self");
+  if (o.has("--index")) {
+    job.index = o.required("--index");
+    job.checks = 0;  // the setting stored in a forest index, unless --checks or --ef says otherwise
+    job.ef = 0;
+    if (o.has("--base")) throw UsageError("--base and --index exclude each other");
+    for (const char* join : {"--self", "--boxsize"})
+      if (o.has(join)) throw UsageError(std::string(join) + " applies to a base built in the run, not to --index");
+    std::string built = first_build_option(o);
+    for (const char* option : {"--forest", "--recall", "--graph", "--degree"})
+      if (built.empty() && o.has(option)) built = option;
+    if (!built.empty()) throw UsageError(built + " applies when building; " + job.index + " was built with its own");
+  } else {
+    job.base = o.required("--base");
+  }
   if (job.self && o.has("--query"))
     throw UsageError("--self and --query exclude each other: --self searches the base for its own points");
   if (!job.self) job.query = o.required("--query");
@@ -178,7 +207,16 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
     if (!o.has("-k")) throw UsageError("missing option -k");
     job.k = o.count("-k", 0, 1, no_limit);
     job.eps = o.number("--eps", 0.0, 0.0, std::numeric_limits<double>::infinity());
-    parse_approximate_options(o, job);
+    if (!job.index.empty()) {
+      if (o.has("--eps") && (o.has("--checks") || o.has("--ef")))
+        throw UsageError("--eps applies to trees, --checks and --ef to forests: not both");
+      if (o.has("--checks") && o.has("--ef"))
+        throw UsageError("--checks searches a forest's trees, --ef its graph: not both");
+      job.checks = o.count("--checks", 0, 1, no_limit);
+      job.ef = o.count("--ef", 0, 1, no_limit);
+    } else {
+      parse_approximate_options(o, job);
+    }
   } else {
     if (!o.has("-r")) throw UsageError("missing option -r");
     job.radius = o.number("-r", 0.0, 0.0, std::numeric_limits<double>::infinity());
@@ -189,17 +227,8 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
   job.distances = o.text("--distances");
   if (!job.distances.empty()) require_extension("--distances", job.distances, ".fvecs");
 
-  const BuildParams defaults;
-  job.build.axis =
-      o.choice("--axis", "spread", {"cycle", "spread"}) == "cycle" ? AxisRule::cycle : AxisRule::max_spread;
-  const std::string position = o.choice("--position", "midpoint", {"midpoint", "median", "middle", "sliding"});
-  job.build.position = position == "middle"    ? PositionRule::middle
-                       : position == "sliding" ? PositionRule::sliding_midpoint
-                       : position == "median"  ? PositionRule::median
-                                               : PositionRule::midpoint;
-  job.build.leaf_size = o.count("--leaf", defaults.leaf_size, 1, no_limit);
-  job.build.max_depth = o.count("--max-depth", defaults.max_depth, 0, 256);
-  job.metric = o.choice("--metric", "l2", {"l2", "l1", "linf"});
+  job.build = parse_build_params(o);
+  job.metric = parse_metric(o);
   if (job.forest_trees > 0) {
     if (job.metric != "l2") throw UsageError("--recall, --forest and --graph search with --metric l2 only");
     for (const char* exact_only : {"--axis", "--position", "--max-depth"})

@@ -29,11 +29,14 @@ struct SearchCommand {
   unsigned default_threads = 0;  ///< --threads when absent; 0 = all hardware threads
   /// The --threads line of the usage text, with the default.
   std::string threads_help = "threads for the build and the queries; 0 (default) = all hardware threads";
+  /// When set, --index (answer from a saved index) is refused with this reason.
+  std::string index_refused_because = {};
 };
 
 struct SearchJob {
   Mode mode = Mode::knn;
   std::string base, query, out, distances;
+  std::string index;  ///< a saved index answers instead of a tree built over base (then empty)
   BuildParams build;
   std::string metric = "l2";
   std::size_t k = 0;
@@ -41,10 +44,10 @@ struct SearchJob {
   std::size_t max_results = std::numeric_limits<std::size_t>::max();
   double eps = 0;
   std::size_t forest_trees = 0;  // 0: the exact tree; else the trees built for the approximate index
-  std::size_t checks = 256;
+  std::size_t checks = 256;  // with --index: 0 = the setting stored in a forest index
   bool use_graph = false;  // the graph is searched (with ef) or, with --recall, may be chosen
   bool use_trees = false;  // the trees are searched (with checks) or, with --recall, may be chosen
-  std::size_t ef = 64;
+  std::size_t ef = 64;       // with --index: 0 = the setting stored in a forest index
   std::size_t degree = ForestParams{}.graph_degree;
   double recall = 0;  // 0: no tuning
   bool self = false;            // knn: each base point's K nearest other points; no query file

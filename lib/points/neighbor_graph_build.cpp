@@ -200,11 +200,10 @@ class GraphBuilder {
   // The lists cut to rough_degree, as a graph.
   NeighborGraph lists_as_graph() const {
     NeighborGraph g;
-    g.degree = std::min(rough_degree, params_.degree);
-    g.links.resize(n_ * g.degree);
+    std::uint32_t* const links = g.reset(n_, std::min(rough_degree, params_.degree));
     for (std::size_t p = 0; p < n_; ++p)
       for (std::size_t i = 0; i < g.degree; ++i)
-        g.links[p * g.degree + i] = i < lists_.size(p) ? lists_.list(p)[i].index : static_cast<std::uint32_t>(p);
+        links[p * g.degree + i] = i < lists_.size(p) ? lists_.list(p)[i].index : static_cast<std::uint32_t>(p);
     return g;
   }
 
@@ -299,8 +298,7 @@ class GraphBuilder {
     }
 
     NeighborGraph graph;
-    graph.degree = degree;
-    graph.links.resize(n_ * degree);
+    std::uint32_t* const all_links = graph.reset(n_, degree);
     const std::size_t most_merged = lists_.width();
     parallel_for(n_, params_.threads, chunk, [&](std::size_t begin, std::size_t end, unsigned worker) {
       std::vector<Candidate<T>> merged, kept(degree);
@@ -320,7 +318,7 @@ class GraphBuilder {
           count = prune(merged.data(), std::min(merged.size(), most_merged), static_cast<std::uint32_t>(p), kept.data(),
                         marks[worker]);
         }
-        std::uint32_t* links = graph.links.data() + p * degree;
+        std::uint32_t* links = all_links + p * degree;
         for (std::size_t i = 0; i < degree; ++i) links[i] = i < count ? kept[i].index : static_cast<std::uint32_t>(p);
       }
     });
@@ -349,8 +347,9 @@ class GraphBuilder {
     const std::size_t degree = graph.degree;
     for (std::size_t r = 0; r < n_; ++r)
       for (std::size_t i = 0; i < degree; ++i) join(static_cast<std::uint32_t>(r), graph.links[r * degree + i]);
+    std::uint32_t* const links = graph.links.owned_data();
     auto add = [&](std::uint32_t from, std::uint32_t to) {
-      std::uint32_t* list = graph.links.data() + std::size_t{from} * degree;
+      std::uint32_t* list = links + std::size_t{from} * degree;
       std::size_t slot = 0;
       while (slot < degree && list[slot] != from) ++slot;  // the first padding slot
       list[std::min(slot, degree - 1)] = to;

@@ -261,34 +261,169 @@ void PointForest<T>::build(const U* rows, std::size_t n, std::size_t dim, const 
   });
 
   // The trees, each from its own generator.
-  trees_.resize(params.trees);
+  std::vector<TreeBuilder::Result<Node>> built(params.trees);
   detail::parallel_for(params.trees, params.threads, 1, [&](std::size_t t0, std::size_t t1, unsigned) {
-    for (std::size_t t = t0; t < t1; ++t) {
-      auto built = TreeBuilder(proj.data(), n, m, params, t).template build<Node>();
-      trees_[t].nodes = std::move(built.nodes);
-      trees_[t].nodes.shrink_to_fit();
-      trees_[t].order = std::move(built.order);
-      trees_[t].depth = built.depth;
-      trees_[t].leaves = built.leaves;
-    }
+    for (std::size_t t = t0; t < t1; ++t) built[t] = TreeBuilder(proj.data(), n, m, params, t).template build<Node>();
   });
 
   // The copy of the points follows the first tree's leaf order; the trees refer to its rows.
-  ids_ = trees_[0].order;
+  const std::vector<std::uint32_t> ids = built[0].order;
   std::vector<std::uint32_t> row_of(n);
-  for (std::size_t r = 0; r < n; ++r) row_of[ids_[r]] = static_cast<std::uint32_t>(r);
-  auto gather = [&](auto& copy) {  // as bytes or as T
-    copy.resize(n * dim);
+  for (std::size_t r = 0; r < n; ++r) row_of[ids[r]] = static_cast<std::uint32_t>(r);
+  auto gather = [&](auto value) {  // as bytes or as T
+    using V = decltype(value);
+    std::vector<V> copy(n * dim);
     for (std::size_t r = 0; r < n; ++r)
-      std::transform(rows + ids_[r] * dim, rows + ids_[r] * dim + dim, copy.begin() + static_cast<long>(r * dim),
-                     [](U v) { return static_cast<typename std::decay_t<decltype(copy)>::value_type>(v); });
+      std::transform(rows + ids[r] * dim, rows + ids[r] * dim + dim, copy.begin() + static_cast<long>(r * dim),
+                     [](U v) { return static_cast<V>(v); });
+    return detail::Storage<V>(std::move(copy));
   };
-  if (params.compact && byte_valued(rows, n * dim)) gather(bytes_);
-  else gather(points_);
-  for (Tree& tree : trees_)
-    for (std::uint32_t& row : tree.order) row = row_of[row];
+  if (params.compact && byte_valued(rows, n * dim)) bytes_ = gather(std::uint8_t{});
+  else points_ = gather(T{});
+  ids_ = detail::Storage<std::uint32_t>(ids);
+  trees_.resize(params.trees);
+  for (std::size_t t = 0; t < params.trees; ++t) {
+    for (std::uint32_t& row : built[t].order) row = row_of[row];
+    built[t].nodes.shrink_to_fit();
+    trees_[t].nodes = detail::Storage<Node>(std::move(built[t].nodes));
+    trees_[t].order = detail::Storage<std::uint32_t>(std::move(built[t].order));
+    trees_[t].depth = built[t].depth;
+    trees_[t].leaves = built[t].leaves;
+  }
 
   if (params.graph == GraphMode::on || (params.graph == GraphMode::automatic && dim >= graph_min_dim)) build_graph();
+}
+
+template <class T>
+PointForest<T>::PointForest(Parts p) : dim_(p.dim), projected_dims_(p.projected_dims), params_(p.params) {
+  auto fail = [](const std::string& what) { throw Error("point forest: " + what); };
+  check_params(p.params);
+  const std::size_t n = p.ids.size(), d = p.dim, m = p.projected_dims;
+  if (d == 0) fail("dimension 0");
+  if (n == 0 || n >= (std::size_t{1} << 30)) fail(std::to_string(n) + " points (1 to 2^30 - 1)");
+  const bool compact = !p.bytes.empty();
+  const std::size_t values = compact ? p.bytes.size() : p.points.size();
+  if ((compact && !p.points.empty()) || values / d != n || values % d != 0)
+    fail(std::to_string(values) + " coordinates for " + std::to_string(n) + " points of dimension " + std::to_string(d));
+  if (p.params.pca ? (m == 0 || m > std::min<std::size_t>(d, 64)) : m != d)
+    fail("projected dimensions " + std::to_string(m) + " do not suit dimension " + std::to_string(d));
+  if (p.mean.size() != d || p.projection.size() != (p.params.pca ? d * m : 0))
+    fail("mean or projection of the wrong size");
+  for (double v : p.mean)
+    if (!std::isfinite(v)) fail("mean is not finite");
+  for (double v : p.projection)
+    if (!std::isfinite(v)) fail("projection is not finite");
+  if (p.nodes.size() != p.params.trees || p.orders.size() != p.params.trees)
+    fail(std::to_string(p.nodes.size()) + " trees, the parameters say " + std::to_string(p.params.trees));
+
+  // The points are finite; the pruning margin needs their largest distance from the mean, worked
+  // out here as the build does.
+  auto largest_distance = [&](const auto* rows) {
+    double largest = 0;
+    bool finite = true;
+    for (std::size_t r = 0; r < n; ++r, rows += d) {
+      double sum = 0;
+      for (std::size_t a = 0; a < d; ++a) {
+        const double v = static_cast<double>(rows[a]) - p.mean[a];
+        sum += v * v;
+      }
+      if (!std::isfinite(sum))  // a coordinate that is not finite, or a sum beyond double's range
+        for (std::size_t a = 0; a < d; ++a) finite = finite && std::isfinite(static_cast<double>(rows[a]));
+      largest = std::max(largest, std::sqrt(sum));
+    }
+    if (!finite) fail("a point is not finite");
+    return largest;
+  };
+  extent_ = compact ? largest_distance(p.bytes.data()) : largest_distance(p.points.data());
+  std::vector<bool> seen(n, false);
+  for (std::size_t r = 0; r < n; ++r) {
+    if (p.ids[r] >= n || seen[p.ids[r]]) fail("original index " + std::to_string(p.ids[r]) + " is out of range or twice");
+    seen[p.ids[r]] = true;
+  }
+
+  trees_.resize(p.params.trees);
+  for (std::size_t t = 0; t < p.params.trees; ++t) {
+    const std::string tree_name = "tree " + std::to_string(t) + ": ";
+    const detail::Storage<Node>& nodes = p.nodes[t];
+    const detail::Storage<std::uint32_t>& order = p.orders[t];
+    if (order.size() != n) fail(tree_name + std::to_string(order.size()) + " rows in its order, expected " + std::to_string(n));
+    for (std::size_t i = 0; i < n; ++i)
+      if (order[i] >= n || (t == 0 && order[i] != i))  // the first tree's leaves are runs of rows
+        fail(tree_name + "row " + std::to_string(order[i]) + " at position " + std::to_string(i) + " is out of place");
+    // Depth first, every node once: a node's left child next to it, its right child where the left
+    // subtree ends; the leaves tile [0, n). Then every descent ends, and reads only rows in range.
+    struct Pending {
+      std::size_t id, parent, depth;
+    };
+    std::vector<Pending> stack{{0, 0, 0}};
+    std::size_t next = 0, next_row = 0;
+    Tree& tree = trees_[t];
+    while (!stack.empty()) {
+      const Pending at = stack.back();
+      stack.pop_back();
+      if (at.id != next || next >= nodes.size())
+        fail(tree_name + "node " + std::to_string(at.parent) + ": child " + std::to_string(at.id) + ", expected " +
+             std::to_string(next) + " (of " + std::to_string(nodes.size()) + " nodes)");
+      const Node& node = nodes[next++];
+      if (node.is_leaf()) {
+        if (node.link != next_row || node.count() > n - next_row)
+          fail(tree_name + "node " + std::to_string(at.id) + ": leaf rows out of place");
+        next_row += node.count();
+        tree.depth = std::max(tree.depth, at.depth);
+        ++tree.leaves;
+        continue;
+      }
+      if (node.axis() >= m) fail(tree_name + "node " + std::to_string(at.id) + ": axis out of range");
+      if (std::isnan(node.left_max) || std::isnan(node.right_min))
+        fail(tree_name + "node " + std::to_string(at.id) + ": split bound is NaN");
+      stack.push_back({node.link, at.id, at.depth + 1});
+      stack.push_back({at.id + 1, at.id, at.depth + 1});
+    }
+    if (next != nodes.size() || next_row != n) fail(tree_name + "nodes or rows not reached from the root");
+    tree.nodes = std::move(p.nodes[t]);
+    tree.order = std::move(p.orders[t]);
+  }
+  // The graph: lists of a width it can be built with, every link a row (a search follows them).
+  if (p.graph_degree != 0 || !p.graph_links.empty()) {
+    if (p.graph_degree < 2 || p.graph_degree > 1024)
+      fail("graph degree " + std::to_string(p.graph_degree) + " (0, or 2 to 1024)");
+    if (p.graph_links.size() / p.graph_degree != n || p.graph_links.size() % p.graph_degree != 0)
+      fail(std::to_string(p.graph_links.size()) + " graph links for " + std::to_string(n) + " points of degree " +
+           std::to_string(p.graph_degree));
+    for (std::size_t i = 0; i < p.graph_links.size(); ++i)
+      if (p.graph_links[i] >= n)
+        fail("graph link " + std::to_string(p.graph_links[i]) + " of row " + std::to_string(i / p.graph_degree) +
+             " is out of range");
+    graph_.degree = p.graph_degree;
+    graph_.links = std::move(p.graph_links);
+  }
+  points_ = std::move(p.points);
+  bytes_ = std::move(p.bytes);
+  ids_ = std::move(p.ids);
+  mean_ = std::move(p.mean);
+  projection_ = std::move(p.projection);
+  backing_ = std::move(p.backing);
+}
+
+template <class T>
+typename PointForest<T>::Parts PointForest<T>::parts() const {
+  Parts p;
+  p.dim = dim_;
+  p.projected_dims = projected_dims_;
+  p.params = params_;
+  p.points = detail::Storage<T>::borrow(points_.data(), points_.size());
+  p.bytes = detail::Storage<std::uint8_t>::borrow(bytes_.data(), bytes_.size());
+  p.ids = detail::Storage<std::uint32_t>::borrow(ids_.data(), ids_.size());
+  p.mean = mean_;
+  p.projection = projection_;
+  for (const Tree& t : trees_) {
+    p.nodes.push_back(detail::Storage<Node>::borrow(t.nodes.data(), t.nodes.size()));
+    p.orders.push_back(detail::Storage<std::uint32_t>::borrow(t.order.data(), t.order.size()));
+  }
+  p.graph_degree = graph_.degree;
+  p.graph_links = detail::Storage<std::uint32_t>::borrow(graph_.links.data(), graph_.links.size());
+  p.backing = backing_;
+  return p;
 }
 
 template <class T>
@@ -314,13 +449,13 @@ std::size_t PointForest<T>::node_count() const {
 
 template <class T>
 std::size_t PointForest<T>::memory_bytes() const {
-  return points_.capacity() * sizeof(T) + bytes_.capacity() + index_bytes();
+  return points_.memory_bytes() + bytes_.memory_bytes() + index_bytes();
 }
 
 template <class T>
 std::size_t PointForest<T>::index_bytes() const {
-  std::size_t bytes = ids_.capacity() * sizeof(std::uint32_t) + (mean_.capacity() + projection_.capacity()) * sizeof(double);
-  for (const Tree& t : trees_) bytes += t.nodes.capacity() * sizeof(Node) + t.order.capacity() * sizeof(std::uint32_t);
+  std::size_t bytes = ids_.memory_bytes() + (mean_.capacity() + projection_.capacity()) * sizeof(double);
+  for (const Tree& t : trees_) bytes += t.nodes.memory_bytes() + t.order.memory_bytes();
   return bytes + graph_.bytes();
 }
 

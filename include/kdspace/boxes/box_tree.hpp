@@ -26,9 +26,11 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "kdspace/box.hpp"
+#include "kdspace/detail/storage.hpp"
 #include "kdspace/rays/ray.hpp"
 
 namespace kdspace {
@@ -164,6 +166,18 @@ struct BoxTreeStats {
   double build_seconds = 0;
 };
 
+/// Everything a BoxTree is made of (what an index file stores, io/index.hpp). `backing` keeps
+/// borrowed storage alive.
+struct BoxTreeParts {
+  BoxBuildParams params;
+  std::size_t max_depth = 0;  ///< the depth cap the build ran with
+  detail::Storage<Box3f> boxes;
+  detail::Storage<BoxNode> nodes;
+  detail::Storage<std::uint32_t> references;
+  detail::Storage<LeafBlock> blocks;
+  std::shared_ptr<const void> backing;
+};
+
 class BoxTree {
  public:
   /// Builds over boxes[0 .. n); box i keeps index i in the answers. n = 0 gives a tree that every ray
@@ -171,6 +185,14 @@ class BoxTree {
   /// 1-based), for n >= 2^30, and for parameters out of range.
   BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params = {});
   explicit BoxTree(const std::vector<Box3f>& boxes, const BoxBuildParams& params = {});
+  /// Makes the tree of `parts` after checking them whole: valid boxes, nodes depth first with every
+  /// link in range and no path deeper than max_box_tree_depth (the traversal's stack), each leaf's
+  /// references ascending, in range and padded as the layout pads them, every box in every leaf
+  /// whose cell it meets, and the leaf blocks equal to the boxes they copy; throws
+  /// Error("box tree: ...") otherwise.
+  explicit BoxTree(BoxTreeParts parts);
+  /// The tree's arrays, borrowed (valid while the tree lives).
+  BoxTreeParts parts() const;
 
   std::size_t size() const { return boxes_.size(); }
   const Box3f& box(std::size_t i) const { return boxes_[i]; }
@@ -182,10 +204,10 @@ class BoxTree {
   std::size_t leaf_count() const { return stats_.leaves; }
   std::size_t node_count() const { return nodes_.size(); }
   /// The nodes, depth first; the root is nodes()[0], the left child of inner node i is i + 1.
-  const std::vector<BoxNode>& nodes() const { return nodes_; }
+  const detail::Storage<BoxNode>& nodes() const { return nodes_; }
   /// The box indices of all leaves, leaf after leaf; a leaf's start is a multiple of 4, and the slots
   /// between one leaf's end and the next leaf's start repeat the leaf's last index.
-  const std::vector<std::uint32_t>& references() const { return references_; }
+  const detail::Storage<std::uint32_t>& references() const { return references_; }
   /// The box indices held by a leaf node: leaf_references(n)[0 .. n.count()), ascending.
   const std::uint32_t* leaf_references(const BoxNode& leaf) const {
     return references_.data() + leaf.first();
@@ -193,8 +215,7 @@ class BoxTree {
   /// Bytes held: the boxes (24 each), the nodes (8 each), the references (4 each) and the leaf blocks
   /// (96 bytes per 4 references: a copy of each leaf's boxes, tested without an indirection).
   std::size_t memory_bytes() const {
-    return boxes_.capacity() * sizeof(Box3f) + nodes_.capacity() * sizeof(BoxNode) +
-           references_.capacity() * sizeof(std::uint32_t) + blocks_.capacity() * sizeof(LeafBlock);
+    return boxes_.memory_bytes() + nodes_.memory_bytes() + references_.memory_bytes() + blocks_.memory_bytes();
   }
 
   // ---- single rays (const, thread-safe) ----------------------------------------------------------
@@ -258,13 +279,16 @@ class BoxTree {
   template <bool AnyHit>
   void trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const;
   void compute_stats();
+  void compute_bounds();
 
-  std::vector<Box3f> boxes_;
+  // Owned, or borrowed from a mapped index file that backing_ keeps alive.
+  detail::Storage<Box3f> boxes_;
   Box3f bounds_;
   BoxBuildParams params_;
-  std::vector<BoxNode> nodes_;
-  std::vector<std::uint32_t> references_;
-  std::vector<LeafBlock> blocks_;  ///< blocks_[r / 4] holds the box of references_[r] in lane r % 4
+  detail::Storage<BoxNode> nodes_;
+  detail::Storage<std::uint32_t> references_;
+  detail::Storage<LeafBlock> blocks_;  ///< blocks_[r / 4] holds the box of references_[r] in lane r % 4
+  std::shared_ptr<const void> backing_;
   /// Scenes and ray origins within +-2^62, with direction components 0 or of magnitude 2^-64 to
   /// 2^64, are traced in float: a ray parameter is then at most 2^127, never overflows.
   static constexpr float float_trace_limit = 0x1p62f;

@@ -36,9 +36,11 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <type_traits>
 #include <vector>
 
+#include "kdspace/detail/storage.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/neighbor_graph.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
@@ -175,6 +177,29 @@ class PointForest {
   /// for bit. With ForestParams::compact the points are kept as bytes, else widened to T.
   PointForest(const std::uint8_t* rows, std::size_t n, std::size_t dim, const ForestParams& params = {});
 
+  /// Everything a forest is made of (what an index file stores, io/index.hpp). `backing` keeps
+  /// borrowed storage alive.
+  struct Parts {
+    std::size_t dim = 0;
+    std::size_t projected_dims = 0;
+    ForestParams params;
+    detail::Storage<T> points;            ///< rows in the first tree's leaf order (empty when compact)
+    detail::Storage<std::uint8_t> bytes;  ///< the same as bytes, when compact (else empty)
+    detail::Storage<std::uint32_t> ids;   ///< original index of each row
+    std::vector<double> mean;
+    std::vector<double> projection;
+    std::vector<detail::Storage<Node>> nodes;            ///< per tree
+    std::vector<detail::Storage<std::uint32_t>> orders;  ///< per tree: rows in its leaf order
+    std::size_t graph_degree = 0;                        ///< width of the graph's lists; 0: no graph
+    detail::Storage<std::uint32_t> graph_links;          ///< size() x graph_degree rows
+    std::shared_ptr<const void> backing;
+  };
+  /// Makes the forest of `parts` after checking them whole (every index in range, tree links
+  /// depth first, leaves tiling the rows, finite values, graph links to rows); throws Error("point forest: ...") else.
+  explicit PointForest(Parts parts);
+  /// The forest's arrays, borrowed (valid while the forest lives).
+  Parts parts() const;
+
   std::size_t size() const { return ids_.size(); }
   std::size_t dim() const { return dim_; }
   std::size_t tree_count() const { return trees_.size(); }
@@ -228,14 +253,14 @@ class PointForest {
   ForestTuning tune(double target_recall, std::size_t k, const TuneParams& params = {}) const;
 
   /// Nodes of tree t, depth first (read-only; for tools and tests).
-  const std::vector<Node>& nodes(std::size_t t) const { return trees_.at(t).nodes; }
+  const detail::Storage<Node>& nodes(std::size_t t) const { return trees_.at(t).nodes; }
   /// The neighbour graph over the rows of the copy of the points (read-only; for tools and tests).
   const detail::NeighborGraph& graph() const { return graph_; }
 
  private:
   struct Tree {
-    std::vector<Node> nodes;             // depth first, nodes[0] the root
-    std::vector<std::uint32_t> order;    // rows of points_ in this tree's leaf order
+    detail::Storage<Node> nodes;            // depth first, nodes[0] the root
+    detail::Storage<std::uint32_t> order;   // rows of points_ in this tree's leaf order
     std::size_t depth = 0;
     std::size_t leaves = 0;
   };
@@ -265,9 +290,11 @@ class PointForest {
   std::size_t dim_ = 0;
   std::size_t projected_dims_ = 0;
   ForestParams params_;
-  std::vector<T> points_;             // copy of the points, rows in the first tree's leaf order
-  std::vector<std::uint8_t> bytes_;   // or, when compact, the same as bytes (points_ then empty)
-  std::vector<std::uint32_t> ids_;    // original index of each row of points_
+  // Owned, or borrowed from a mapped index file that backing_ keeps alive.
+  detail::Storage<T> points_;             // copy of the points, rows in the first tree's leaf order
+  detail::Storage<std::uint8_t> bytes_;   // or, when compact, the same as bytes (points_ then empty)
+  detail::Storage<std::uint32_t> ids_;    // original index of each row of points_
+  std::shared_ptr<const void> backing_;
   std::vector<double> mean_;          // dim
   std::vector<double> projection_;    // projected_dims x dim, row-major: row j = direction j
   std::vector<Tree> trees_;

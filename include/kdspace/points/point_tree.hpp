@@ -20,11 +20,13 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <string>
 #include <type_traits>
 #include <utility>
 #include <vector>
 
+#include "kdspace/detail/storage.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/metric.hpp"
 #include "kdspace/points/detail/blocked_scan.hpp"
@@ -34,6 +36,7 @@
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
 #include "kdspace/points/detail/row_bounds.hpp"
+#include "kdspace/points/detail/tree_check.hpp"
 #include "kdspace/points/neighbor.hpp"
 #include "kdspace/points/params.hpp"
 
@@ -97,16 +100,46 @@ class PointTree {
     if (Dim != Dynamic && other.dim() != static_cast<std::size_t>(Dim))
       throw Error("tree of dimension " + std::to_string(other.dim()) + " copied into a tree of dimension " +
                   std::to_string(Dim));
-    points_.assign(other.points_.begin(), other.points_.end());
-    order_ = other.order_;
-    nodes_.reserve(other.nodes_.size());
+    std::vector<Node> nodes;
+    nodes.reserve(other.nodes_.size());
     for (const auto& node : other.nodes_)
-      nodes_.push_back(Node{static_cast<T>(node.left_max), static_cast<T>(node.right_min), node.link, node.info});
+      nodes.push_back(Node{static_cast<T>(node.left_max), static_cast<T>(node.right_min), node.link, node.info});
+    points_ = detail::Storage<T>(std::vector<T>(other.points_.begin(), other.points_.end()));
+    order_ = detail::Storage<std::uint32_t>(std::vector<std::uint32_t>(other.order_.begin(), other.order_.end()));
+    nodes_ = detail::Storage<Node>(std::move(nodes));
+    params_ = other.params_;
     root_lo_.assign(other.root_lo_.begin(), other.root_lo_.end());
     root_hi_.assign(other.root_hi_.begin(), other.root_hi_.end());
     depth_ = other.depth_;
     leaves_ = other.leaves_;
     finish_build();
+  }
+
+  /// Makes the tree of `parts` (from parts(), or loaded from an index file: io/index.hpp), after
+  /// checking them whole (detail/tree_check.hpp): parts that pass answer exactly; others throw Error.
+  explicit PointTree(detail::PointTreeParts<T> parts, const Metric& metric = {})
+      : dim_(parts.dim), metric_(metric) {
+    if (Dim != Dynamic && parts.dim != static_cast<std::size_t>(Dim))
+      throw Error("point tree: dimension " + std::to_string(parts.dim) + ", this tree is built for dimension " +
+                  std::to_string(Dim));
+    const detail::TreeShape shape = detail::check_point_tree(parts);
+    params_ = parts.params;
+    points_ = std::move(parts.points);
+    order_ = std::move(parts.order);
+    nodes_ = std::move(parts.nodes);
+    backing_ = std::move(parts.backing);
+    root_lo_ = std::move(parts.root_lo);
+    root_hi_ = std::move(parts.root_hi);
+    depth_ = shape.depth;
+    leaves_ = shape.leaves;
+    finish_build();
+  }
+
+  /// The tree's arrays, borrowed (valid while the tree lives): what an index file stores.
+  detail::PointTreeParts<T> parts() const {
+    return {dim(), params_, detail::Storage<T>::borrow(points_.data(), points_.size()),
+            detail::Storage<std::uint32_t>::borrow(order_.data(), order_.size()),
+            detail::Storage<Node>::borrow(nodes_.data(), nodes_.size()), root_lo_, root_hi_, backing_};
   }
 
   std::size_t size() const { return order_.size(); }
@@ -119,11 +152,13 @@ class PointTree {
   std::size_t leaf_count() const { return leaves_; }
   std::size_t node_count() const { return nodes_.size(); }
   /// Bytes held: points copy + index + nodes.
+  /// (For a tree loaded by memory-mapping, the mapped bytes of those arrays.)
   std::size_t memory_bytes() const {
-    return points_.capacity() * sizeof(T) + order_.capacity() * sizeof(std::uint32_t) + nodes_.capacity() * sizeof(Node);
+    return points_.memory_bytes() + order_.memory_bytes() + nodes_.memory_bytes();
   }
   /// Bytes held besides the copy of the points.
-  std::size_t index_bytes() const { return memory_bytes() - points_.capacity() * sizeof(T); }
+  std::size_t index_bytes() const { return memory_bytes() - points_.memory_bytes(); }
+  const BuildParams& params() const { return params_; }
 
   // ---- single queries (const, thread-safe) -------------------------------------------------------
 
@@ -261,12 +296,12 @@ class PointTree {
   }
 
   /// Nodes in depth-first order (read-only; for tools and tests).
-  const std::vector<Node>& nodes() const { return nodes_; }
+  const detail::Storage<Node>& nodes() const { return nodes_; }
   /// The original index of each point in leaf order: a leaf holds leaf_order()[first, first + count).
-  const std::vector<Index>& leaf_order() const { return order_; }
+  const detail::Storage<Index>& leaf_order() const { return order_; }
   /// The points in leaf order (row-major; a leaf holds rows [first, first + count)): with nodes()
   /// and leaf_order(), what a traversal outside the tree (the dual-tree joins) reads.
-  const std::vector<T>& points_in_leaf_order() const { return points_; }
+  const detail::Storage<T>& points_in_leaf_order() const { return points_; }
 
  private:
   // ---- validation ---------------------------------------------------------------------------------
@@ -319,12 +354,13 @@ class PointTree {
       using Builder = detail::Builder<T, Dim, decltype(axis_rule), decltype(position_rule)>;
       return Builder(rows, n, d, params).build(root_lo_.data(), root_hi_.data());
     });
-    nodes_ = std::move(built.nodes);
-    points_ = std::move(built.points);
-    order_ = std::move(built.order);
+    built.nodes.shrink_to_fit();
+    nodes_ = detail::Storage<Node>(std::move(built.nodes));
+    points_ = detail::Storage<T>(std::move(built.points));
+    order_ = detail::Storage<std::uint32_t>(std::move(built.order));
+    params_ = params;
     depth_ = built.depth;
     leaves_ = built.leaves;
-    nodes_.shrink_to_fit();
     finish_build();
   }
 
@@ -582,9 +618,12 @@ class PointTree {
 
   std::size_t dim_;
   Metric metric_;
-  std::vector<T> points_;             // leaf-ordered copy, row-major
-  std::vector<std::uint32_t> order_;  // original index of each leaf-ordered point
-  std::vector<Node> nodes_;           // depth first; nodes_[0] is the root
+  // Owned, or borrowed from a mapped index file that backing_ keeps alive.
+  detail::Storage<T> points_;             // leaf-ordered copy, row-major
+  detail::Storage<std::uint32_t> order_;  // original index of each leaf-ordered point
+  detail::Storage<Node> nodes_;           // depth first; nodes_[0] is the root
+  std::shared_ptr<const void> backing_;
+  BuildParams params_;
   std::vector<T> root_lo_, root_hi_;  // bounds of all points
   std::vector<T> centre_;             // middle of those bounds: the origin of the blocked scan
   std::size_t depth_ = 0;

@@ -59,7 +59,8 @@ Exit codes: 0 success, 2 usage error, 1 bad data or I/O error (the same on every
 const SearchCommand mpi_command{
     "kdspace-mpi", "not available in kdspace-mpi: it searches exactly (use kdspace for approximate search)",
     "not available in kdspace-mpi (use kdspace for --self and --boxsize)", 1,
-    "threads a rank for its build and its searches; default 1 (one rank a core); 0 = all hardware threads"};
+    "threads a rank for its build and its searches; default 1 (one rank a core); 0 = all hardware threads",
+    "not available in kdspace-mpi: every rank builds the tree of its own part of the base"};
 
 double seconds_since(double start) {
   return MPI_Wtime() - start;

@@ -1,0 +1,520 @@
+// kdspace-index-bench: saved and updatable indexes.
+//
+//  1. Load against build. For 1e6 uniform 3-D float points (PointTree), 1e6 x 128-D byte descriptors
+//     (PointForest, kept as bytes) and 1e6 boxes (BoxTree, SAH): the build, the save, and loading the
+//     saved file by memory-mapping and by reading it (each load checks every checksum and the whole
+//     structure). The loaded index must answer exactly as the built one (k-NN ids and distances, or
+//     hits), else the exit status is 1. Loads read a file that was just written, so from the page
+//     cache (warm), as an index kept on a server is.
+//  2. Updates. 1e6 uniform 3-D points, then churn: 500,000 random points removed one at a time and
+//     500,000 new ones inserted, half one at a time and half in batches of 1,000, interleaved across
+//     libraries in rounds of 50,000 operations: kdspace's DynamicPointTree, nanoflann's
+//     KDTreeSingleIndexDynamicAdaptor (leaf 10; removal marks, never compacts) and hnswlib's
+//     HierarchicalNSW (M 16, ef_construction 100; addPoint, markDelete). Throughputs in operations
+//     per second.
+//  3. Queries after the churn (50% of the points replaced): exact 10-NN, one thread, for the
+//     DynamicPointTree as the churn left it, the same after compact(), a PointTree built afresh over
+//     the points held, nanoflann's dynamic index, and hnswlib (ef 64; recall@10 beside it). The
+//     DynamicPointTree's answers must equal the fresh tree's bit for bit (ids mapped), nanoflann's
+//     distances must agree within 1e-5 relative; else the exit status is 1.
+//
+// usage: kdspace-index-bench [--quick] [--reps R] [--dir DIR] [--only load|updates]
+//   --quick   sizes / 10 (for development)
+//   --reps R  repetitions of the timed loads and queries, interleaved, median reported (default 5)
+//   --dir D   where the index files go (default: the temporary folder)
+// Output: markdown tables, then one JSON line per measurement ({"bench":"index",...}).
+#include <hnswlib/hnswlib.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <nanoflann.hpp>
+#include <numeric>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "kdspace/io/index.hpp"
+#include "kdspace/kdspace.hpp"
+#include "kdspace/rays/scene_gen.hpp"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+double dbl(std::size_t x) {
+  return static_cast<double>(x);
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+std::vector<std::string> json_lines;
+bool all_agree = true;
+
+void json(const std::string& fields) {
+  json_lines.push_back("{\"bench\": \"index\", " + fields + "}");
+}
+std::string num(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+std::vector<float> uniform_points(std::size_t n, std::size_t dim, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  std::vector<float> p(n * dim);
+  for (auto& v : p) v = u(rng);
+  return p;
+}
+
+// SIFT-like byte descriptors: 256 cluster centres, each coordinate a centre's plus noise, clipped to
+// 0..255.
+std::vector<std::uint8_t> byte_descriptors(std::size_t n, std::size_t dim, std::uint32_t seed) {
+  std::mt19937 centre_rng(99);
+  std::uniform_int_distribution<int> level(0, 160);
+  std::vector<int> centres(256 * dim);
+  for (auto& c : centres) c = level(centre_rng);
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0, 18);
+  std::vector<std::uint8_t> p(n * dim);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t c = rng() % 256;
+    for (std::size_t a = 0; a < dim; ++a)
+      p[i * dim + a] =
+          static_cast<std::uint8_t>(std::clamp(centres[c * dim + a] + std::lround(noise(rng)), 0L, 255L));
+  }
+  return p;
+}
+
+// ---- 1. load against build -----------------------------------------------------------------------------
+
+struct LoadRow {
+  std::string what;
+  std::size_t n = 0;
+  double build_s = 0, save_s = 0, file_mb = 0, map_s = 0, read_s = 0;
+  bool same = false;
+};
+
+// Times build() once, save(path) once, then `reps` interleaved loads of each mode; same(loaded)
+// compares a loaded index's answers with the built one's.
+template <class Index, class Build, class Load, class Same>
+LoadRow load_against_build(const std::string& what, std::size_t n, const std::string& path, int reps,
+                           Build build, Load load, Same same) {
+  LoadRow row;
+  row.what = what;
+  row.n = n;
+  std::fprintf(stderr, "index-bench: building %s\n", what.c_str());
+  Clock::time_point start = Clock::now();
+  const Index built = build();
+  row.build_s = seconds_since(start);
+  start = Clock::now();
+  kdspace::io::save(path, built);
+  row.save_s = seconds_since(start);
+  row.file_mb = dbl(std::filesystem::file_size(path)) / 1e6;
+  std::vector<double> map_s, read_s;
+  row.same = true;
+  for (int r = 0; r < reps; ++r) {
+    for (auto mode : {kdspace::io::LoadMode::map, kdspace::io::LoadMode::read}) {
+      start = Clock::now();
+      const Index loaded = load(path, mode);
+      (mode == kdspace::io::LoadMode::map ? map_s : read_s).push_back(seconds_since(start));
+      if (r == 0) row.same = row.same && same(built, loaded);
+    }
+  }
+  row.map_s = median(map_s);
+  row.read_s = median(read_s);
+  all_agree = all_agree && row.same;
+  std::filesystem::remove(path);
+  json("\"part\": \"load\", \"index\": \"" + what + "\", \"n\": " + std::to_string(n) +
+       ", \"build_s\": " + num(row.build_s) + ", \"save_s\": " + num(row.save_s) +
+       ", \"file_mb\": " + num(row.file_mb) + ", \"load_map_s\": " + num(row.map_s) +
+       ", \"load_read_s\": " + num(row.read_s) + ", \"same_answers\": " + (row.same ? "true" : "false"));
+  return row;
+}
+
+void part_load(std::size_t scale, int reps, const std::string& dir) {
+  std::vector<LoadRow> rows;
+  const std::size_t n = 1000000 / scale, nq = 1000;
+  {
+    const auto base = uniform_points(n, 3, 1);
+    const auto queries = uniform_points(nq, 3, 2);
+    using Tree = kdspace::PointTree<float>;
+    rows.push_back(load_against_build<Tree>(
+        "PointTree, uniform 3-D float", n, dir + "/bench-tree.kdx", reps,
+        [&] { return Tree(base.data(), n, 3); },
+        [](const std::string& p, kdspace::io::LoadMode m) {
+          return kdspace::io::load_point_tree<float>(p, m);
+        },
+        [&](const Tree& a, const Tree& b) {
+          return a.knn_batch(queries.data(), nq, 10, {}, 1).neighbors ==
+                 b.knn_batch(queries.data(), nq, 10, {}, 1).neighbors;
+        }));
+  }
+  {
+    const std::size_t dim = 128;
+    const auto base = byte_descriptors(n, dim, 3);
+    const auto query_bytes = byte_descriptors(nq, dim, 4);
+    const std::vector<float> queries(query_bytes.begin(), query_bytes.end());
+    using Forest = kdspace::PointForest<float>;
+    kdspace::ForestParams params;
+    params.threads = 1;
+    rows.push_back(load_against_build<Forest>(
+        "PointForest, 128-D bytes (4 trees)", n, dir + "/bench-forest.kdx", reps,
+        [&] { return Forest(base.data(), n, dim, params); },
+        [](const std::string& p, kdspace::io::LoadMode m) {
+          return kdspace::io::load_point_forest<float>(p, m);
+        },
+        [&](const Forest& a, const Forest& b) {
+          const kdspace::ForestSearchParams search{512, 0};
+          return a.knn_batch(queries.data(), nq, 10, search, 1).neighbors ==
+                 b.knn_batch(queries.data(), nq, 10, search, 1).neighbors;
+        }));
+  }
+  {
+    const auto boxes = kdspace::generate_boxes(n, kdspace::SceneKind::uniform, 5);
+    const auto rays = kdspace::random_rays(10000, kdspace::Box3f{{0, 0, 0}, {1, 1, 1}}, 6);
+    using kdspace::BoxTree;
+    rows.push_back(load_against_build<BoxTree>(
+        "BoxTree, uniform boxes (SAH, O(N log N))", n, dir + "/bench-boxes.kdx", reps,
+        [&] { return BoxTree(boxes); },
+        [](const std::string& p, kdspace::io::LoadMode m) { return kdspace::io::load_box_tree(p, m); },
+        [&](const BoxTree& a, const BoxTree& b) {
+          const auto x = a.closest_hit_batch(rays, 1), y = b.closest_hit_batch(rays, 1);
+          for (std::size_t i = 0; i < rays.size(); ++i)
+            if (x[i].box != y[i].box || !(x[i].t == y[i].t || !x[i].hit())) return false;
+          return true;
+        }));
+  }
+  std::printf("\n### Loading a saved index against building it (median of %d loads)\n\n", reps);
+  std::printf(
+      "| index | n | build s | save s | file MB | load, mapped s | mapped ÷ build | load, read s | same "
+      "answers |\n");
+  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|:---:|\n");
+  for (const LoadRow& r : rows)
+    std::printf("| %s | %zu | %.3f | %.3f | %.1f | %.4f | %.2f%% | %.4f | %s |\n", r.what.c_str(), r.n,
+                r.build_s, r.save_s, r.file_mb, r.map_s, 100 * r.map_s / r.build_s, r.read_s,
+                r.same ? "yes" : "NO");
+}
+
+// ---- 2. and 3. updates, and queries after churn ---------------------------------------------------------
+
+// nanoflann's view of the points: every point ever added, by id (removed ones stay, marked in the index).
+struct GrowingCloud {
+  std::vector<float> coords;
+  std::size_t kdtree_get_point_count() const { return coords.size() / 3; }
+  float kdtree_get_pt(std::size_t i, std::size_t a) const { return coords[i * 3 + a]; }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
+};
+using NanoDynamic =
+    nanoflann::KDTreeSingleIndexDynamicAdaptor<nanoflann::L2_Simple_Adaptor<float, GrowingCloud>,
+                                               GrowingCloud, 3, std::size_t>;
+
+/// One library's updatable index of 3-D points, ids = positions in the stream of points.
+class Updatable {
+ public:
+  virtual ~Updatable() = default;
+  virtual const char* name() const = 0;
+  virtual void insert(const float* rows, std::size_t first_id, std::size_t n, bool one_at_a_time) = 0;
+  virtual void remove(const std::uint32_t* ids, std::size_t n) = 0;  // one at a time
+  /// 10-NN of the queries; squared or true distances as `true_distances` says.
+  virtual void knn10(const std::vector<float>& queries, std::vector<std::uint32_t>& ids,
+                     std::vector<float>& dists) = 0;
+  std::vector<double> seconds[3];  // insert one at a time, insert in batches, remove
+  std::size_t ops[3] = {};
+};
+
+class KdspaceUpdatable : public Updatable {
+ public:
+  KdspaceUpdatable(const float* rows, std::size_t n) : tree_(rows, n, 3) {}
+  const char* name() const override { return "kdspace DynamicPointTree"; }
+  void insert(const float* rows, std::size_t, std::size_t n, bool one_at_a_time) override {
+    if (!one_at_a_time) {
+      tree_.insert(rows, n);
+      return;
+    }
+    for (std::size_t i = 0; i < n; ++i) tree_.insert(rows + 3 * i, 1);
+  }
+  void remove(const std::uint32_t* ids, std::size_t n) override {
+    for (std::size_t i = 0; i < n; ++i) tree_.remove(ids[i]);
+  }
+  void knn10(const std::vector<float>& q, std::vector<std::uint32_t>& ids,
+             std::vector<float>& dists) override {
+    answers(tree_.knn_batch(q.data(), q.size() / 3, 10, {}, 1), ids, dists);
+  }
+  static void answers(const kdspace::NeighborLists<float>& lists, std::vector<std::uint32_t>& ids,
+                      std::vector<float>& dists) {
+    ids.clear();
+    dists.clear();
+    for (const auto& nb : lists.neighbors) ids.push_back(nb.index), dists.push_back(nb.distance);
+  }
+  kdspace::DynamicPointTree<float> tree_;
+};
+
+class NanoflannUpdatable : public Updatable {
+ public:
+  NanoflannUpdatable(const float* rows, std::size_t n) {
+    cloud_.coords.assign(rows, rows + 3 * n);
+    index_ = std::make_unique<NanoDynamic>(3, cloud_, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  }
+  const char* name() const override { return "nanoflann KDTreeSingleIndexDynamicAdaptor (leaf 10)"; }
+  void insert(const float* rows, std::size_t first_id, std::size_t n, bool one_at_a_time) override {
+    cloud_.coords.insert(cloud_.coords.end(), rows, rows + 3 * n);
+    if (!one_at_a_time) {
+      index_->addPoints(first_id, first_id + n - 1);
+      return;
+    }
+    for (std::size_t i = 0; i < n; ++i) index_->addPoints(first_id + i, first_id + i);
+  }
+  void remove(const std::uint32_t* ids, std::size_t n) override {
+    for (std::size_t i = 0; i < n; ++i) index_->removePoint(ids[i]);
+  }
+  void knn10(const std::vector<float>& q, std::vector<std::uint32_t>& ids,
+             std::vector<float>& dists) override {
+    const std::size_t nq = q.size() / 3;
+    ids.assign(nq * 10, 0);
+    dists.assign(nq * 10, 0);
+    std::size_t found[10];
+    float d2[10];
+    for (std::size_t i = 0; i < nq; ++i) {
+      nanoflann::KNNResultSet<float, std::size_t> result(10);
+      result.init(found, d2);
+      index_->findNeighbors(result, q.data() + 3 * i, nanoflann::SearchParams());
+      for (std::size_t j = 0; j < 10; ++j)
+        ids[i * 10 + j] = static_cast<std::uint32_t>(found[j]), dists[i * 10 + j] = std::sqrt(d2[j]);
+    }
+  }
+
+ private:
+  GrowingCloud cloud_;
+  std::unique_ptr<NanoDynamic> index_;
+};
+
+class HnswUpdatable : public Updatable {
+ public:
+  HnswUpdatable(const float* rows, std::size_t n, std::size_t capacity) : space_(3) {
+    index_ = std::make_unique<hnswlib::HierarchicalNSW<float>>(&space_, capacity, 16, 100);
+    for (std::size_t i = 0; i < n; ++i) index_->addPoint(rows + 3 * i, i);
+    index_->setEf(64);
+  }
+  const char* name() const override { return "hnswlib HierarchicalNSW (M 16, ef_construction 100, ef 64)"; }
+  void insert(const float* rows, std::size_t first_id, std::size_t n, bool) override {
+    for (std::size_t i = 0; i < n; ++i) index_->addPoint(rows + 3 * i, first_id + i);
+  }
+  void remove(const std::uint32_t* ids, std::size_t n) override {
+    for (std::size_t i = 0; i < n; ++i) index_->markDelete(ids[i]);
+  }
+  void knn10(const std::vector<float>& q, std::vector<std::uint32_t>& ids,
+             std::vector<float>& dists) override {
+    const std::size_t nq = q.size() / 3;
+    ids.assign(nq * 10, 0);
+    dists.assign(nq * 10, 0);
+    for (std::size_t i = 0; i < nq; ++i) {
+      auto found = index_->searchKnn(q.data() + 3 * i, 10);
+      for (std::size_t j = 10; j-- > 0 && !found.empty(); found.pop())
+        ids[i * 10 + j] = static_cast<std::uint32_t>(found.top().second),
+                     dists[i * 10 + j] = std::sqrt(found.top().first);
+    }
+  }
+
+ private:
+  hnswlib::L2Space space_;
+  std::unique_ptr<hnswlib::HierarchicalNSW<float>> index_;
+};
+
+void part_updates(std::size_t scale, int reps) {
+  const std::size_t n = 1000000 / scale, churn = n / 2, round = 50000 / scale,
+                    nq = 10000 / (scale > 1 ? 10 : 1);
+  const auto base = uniform_points(n, 3, 11);
+  const auto fresh_points = uniform_points(churn, 3, 12);
+  const auto queries = uniform_points(nq, 3, 13);
+  std::vector<std::uint32_t> victims(n);
+  std::iota(victims.begin(), victims.end(), 0u);
+  std::shuffle(victims.begin(), victims.end(), std::mt19937(14));
+  victims.resize(churn);
+
+  std::vector<std::unique_ptr<Updatable>> libs;
+  std::vector<double> initial_s;
+  for (int l = 0; l < 3; ++l) {
+    std::fprintf(stderr, "index-bench: initial build %d of 3\n", l + 1);
+    const auto start = Clock::now();
+    if (l == 0) libs.push_back(std::make_unique<KdspaceUpdatable>(base.data(), n));
+    if (l == 1) libs.push_back(std::make_unique<NanoflannUpdatable>(base.data(), n));
+    if (l == 2) libs.push_back(std::make_unique<HnswUpdatable>(base.data(), n, n + churn));
+    initial_s.push_back(seconds_since(start));
+  }
+  // The churn, in rounds: each round removes `round` victims one at a time, then inserts `round` new
+  // points (one at a time in the first half of the rounds, in batches of 1,000 in the second).
+  std::size_t inserted = 0, removed = 0;
+  while (removed < churn) {
+    const std::size_t count = std::min(round, churn - removed);
+    const bool one_at_a_time = inserted < churn / 2;
+    std::fprintf(stderr, "index-bench: churn %zu / %zu\n", removed, churn);
+    for (auto& lib : libs) {
+      auto start = Clock::now();
+      lib->remove(victims.data() + removed, count);
+      lib->seconds[2].push_back(seconds_since(start));
+      lib->ops[2] += count;
+      const int kind = one_at_a_time ? 0 : 1;
+      start = Clock::now();
+      for (std::size_t b = 0; b < count; b += 1000) {
+        const std::size_t m = std::min<std::size_t>(1000, count - b);
+        lib->insert(fresh_points.data() + 3 * (inserted + b), n + inserted + b, m, one_at_a_time);
+      }
+      lib->seconds[kind].push_back(seconds_since(start));
+      lib->ops[kind] += count;
+    }
+    removed += count;
+    inserted += count;
+  }
+
+  // The points held after the churn, by id, and a PointTree built afresh over them (in id order).
+  std::vector<bool> gone(n, false);
+  for (std::uint32_t v : victims) gone[v] = true;
+  std::vector<std::uint32_t> live_ids;
+  std::vector<float> live;
+  for (std::size_t i = 0; i < n + churn; ++i) {
+    if (i < n && gone[i]) continue;
+    live_ids.push_back(static_cast<std::uint32_t>(i));
+    const float* p = i < n ? base.data() + 3 * i : fresh_points.data() + 3 * (i - n);
+    live.insert(live.end(), p, p + 3);
+  }
+  auto* kd = static_cast<KdspaceUpdatable*>(libs[0].get());
+  const std::size_t parts = kd->tree_.part_count(), pending = kd->tree_.removed_count();
+  auto start = Clock::now();
+  const kdspace::PointTree<float> fresh(live.data(), live_ids.size(), 3);
+  const double fresh_build_s = seconds_since(start);
+  start = Clock::now();
+  kdspace::DynamicPointTree<float> copy = kdspace::io::load_dynamic_point_tree<float>(
+      [&] {
+        const std::string p = (std::filesystem::temp_directory_path() / "bench-churn.kdx").string();
+        kdspace::io::save(p, kd->tree_);
+        return p;
+      }(),
+      kdspace::io::LoadMode::read);
+  copy.compact();
+  const double compact_s = seconds_since(start);
+
+  // Queries: reps interleaved across the five.
+  const char* labels[5] = {"kdspace DynamicPointTree after the churn",
+                           "kdspace DynamicPointTree after compact()", "kdspace PointTree built afresh",
+                           "nanoflann dynamic after the churn", "hnswlib after the churn (ef 64)"};
+  std::vector<double> query_s[5];
+  std::vector<std::uint32_t> ids[5];
+  std::vector<float> dists[5];
+  for (int r = 0; r < reps; ++r) {
+    for (int l = 0; l < 5; ++l) {
+      start = Clock::now();
+      if (l == 0) kd->knn10(queries, ids[l], dists[l]);
+      if (l == 1) KdspaceUpdatable::answers(copy.knn_batch(queries.data(), nq, 10, {}, 1), ids[l], dists[l]);
+      if (l == 2) KdspaceUpdatable::answers(fresh.knn_batch(queries.data(), nq, 10, {}, 1), ids[l], dists[l]);
+      if (l == 3) libs[1]->knn10(queries, ids[l], dists[l]);
+      if (l == 4) libs[2]->knn10(queries, ids[l], dists[l]);
+      query_s[l].push_back(seconds_since(start));
+    }
+  }
+  for (auto& i : ids[2]) i = live_ids[i];  // fresh tree's indices as ids
+  const bool dynamic_exact =
+      ids[0] == ids[2] && dists[0] == dists[2] && ids[1] == ids[2] && dists[1] == dists[2];
+  std::size_t nano_off = 0, hnsw_found = 0;
+  for (std::size_t i = 0; i < dists[2].size(); ++i) {
+    const float ref = dists[2][i];
+    nano_off += (dists[3][i] == ref || std::abs(dists[3][i] - ref) <= 1e-5f * ref) ? 0 : 1;
+    hnsw_found += dists[4][i] <= dists[2][(i / 10) * 10 + 9] * (1 + 1e-5f) ? 1 : 0;
+  }
+  all_agree = all_agree && dynamic_exact && nano_off == 0;
+  const double hnsw_recall = dbl(hnsw_found) / dbl(dists[2].size());
+
+  const char* op_names[3] = {"insert, one at a time", "insert, batches of 1,000", "remove, one at a time"};
+  std::printf(
+      "\n### Updates: %zu points, then %zu removed and %zu inserted (ops/s; rounds of %zu, interleaved)\n\n",
+      n, churn, churn, round);
+  std::printf("| library | initial build s | %s | %s | %s |\n|---|---:|---:|---:|---:|\n", op_names[0],
+              op_names[1], op_names[2]);
+  for (std::size_t l = 0; l < libs.size(); ++l) {
+    std::printf("| %s | %.2f", libs[l]->name(), initial_s[l]);
+    std::string fields = "\"part\": \"updates\", \"library\": \"" + std::string(libs[l]->name()) +
+                         "\", \"n\": " + std::to_string(n) + ", \"initial_build_s\": " + num(initial_s[l]);
+    for (int k = 0; k < 3; ++k) {
+      double total = 0;
+      for (double s : libs[l]->seconds[k]) total += s;
+      const double rate = dbl(libs[l]->ops[k]) / total;
+      std::printf(" | %.0f", rate);
+      fields += std::string(", \"") +
+                (k == 0   ? "insert_one"
+                 : k == 1 ? "insert_batch"
+                          : "remove_one") +
+                "_per_s\": " + num(rate);
+    }
+    std::printf(" |\n");
+    json(fields);
+  }
+  std::printf(
+      "\nkdspace after the churn: %zu parts, %zu removed points still held (tombstones); a PointTree over "
+      "the "
+      "%zu points held builds in %.3f s; save, load and compact() of the DynamicPointTree took %.3f s.\n",
+      parts, pending, live_ids.size(), fresh_build_s, compact_s);
+  std::printf("\n### Exact 10-NN after the churn (%zu queries, one thread, median of %d)\n\n", nq, reps);
+  std::printf("| index | queries/s | ÷ fresh PointTree | answers |\n|---|---:|---:|---|\n");
+  const double fresh_s = median(query_s[2]);
+  for (int l = 0; l < 5; ++l) {
+    const double s = median(query_s[l]);
+    std::string note = l <= 2   ? (dynamic_exact ? "equal to the fresh tree's, bit for bit" : "DIFFER")
+                       : l == 3 ? (nano_off == 0 ? "distances equal within 1e-5"
+                                                 : std::to_string(nano_off) + " distances differ")
+                                : "recall@10 " + num(hnsw_recall);
+    std::printf("| %s | %.0f | %.2f | %s |\n", labels[l], dbl(nq) / s, fresh_s / s, note.c_str());
+    json(std::string("\"part\": \"queries_after_churn\", \"index\": \"") + labels[l] +
+         "\", \"queries_per_s\": " + num(dbl(nq) / s) +
+         (l == 4 ? ", \"recall_at_10\": " + num(hnsw_recall) : std::string()));
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::size_t scale = 1;
+  int reps = 5;
+  std::string dir = std::filesystem::temp_directory_path().string(), only;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--quick")
+      scale = 10;
+    else if (a == "--reps" && i + 1 < argc)
+      reps = std::max(1, std::atoi(argv[++i]));
+    else if (a == "--dir" && i + 1 < argc)
+      dir = argv[++i];
+    else if (a == "--only" && i + 1 < argc)
+      only = argv[++i];
+    else {
+      std::fprintf(stderr,
+                   "usage: kdspace-index-bench [--quick] [--reps R] [--dir DIR] [--only load|updates]\n");
+      return 2;
+    }
+  }
+  try {
+    if (only.empty() || only == "load") part_load(scale, reps, dir);
+    if (only.empty() || only == "updates") part_updates(scale, reps);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "kdspace-index-bench: %s\n", e.what());
+    return 1;
+  }
+  std::printf("\n");
+  for (const std::string& line : json_lines) std::printf("%s\n", line.c_str());
+  if (!all_agree) std::fprintf(stderr, "kdspace-index-bench: ANSWERS DISAGREE (see the tables)\n");
+  return all_agree ? 0 : 1;
+}

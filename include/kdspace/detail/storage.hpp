@@ -1,0 +1,92 @@
+// Storage<T>: the array behind an index: either its own std::vector, or memory it borrows (a section
+// of a memory-mapped index file, see io/index.hpp). The index that holds borrowed storage also holds
+// what keeps that memory alive (the mapping), so the storage never outlives it.
+//
+// Queries read through data() and operator[], one pointer either way: borrowing costs the query path
+// nothing.
+#pragma once
+
+#include <cstddef>
+#include <utility>
+#include <vector>
+
+namespace kdspace::detail {
+
+template <class T>
+class Storage {
+ public:
+  Storage() = default;
+  /// Owns `values`.
+  explicit Storage(std::vector<T> values) : owned_(std::move(values)) { point_at_owned(); }
+  /// Borrows [data, data + size): the caller keeps that memory alive as long as this storage.
+  static Storage borrow(const T* data, std::size_t size) {
+    Storage s;
+    s.data_ = data;
+    s.size_ = size;
+    s.borrowed_ = true;
+    return s;
+  }
+
+  Storage(const Storage& o) : owned_(o.owned_), data_(o.data_), size_(o.size_), borrowed_(o.borrowed_) {
+    if (!borrowed_) point_at_owned();
+  }
+  Storage(Storage&& o) noexcept
+      : owned_(std::move(o.owned_)), data_(o.data_), size_(o.size_), borrowed_(o.borrowed_) {
+    if (!borrowed_) point_at_owned();
+    o.clear();
+  }
+  Storage& operator=(const Storage& o) {
+    if (this != &o) *this = Storage(o);
+    return *this;
+  }
+  Storage& operator=(Storage&& o) noexcept {
+    if (this == &o) return *this;
+    owned_ = std::move(o.owned_);
+    data_ = o.data_;
+    size_ = o.size_;
+    borrowed_ = o.borrowed_;
+    if (!borrowed_) point_at_owned();
+    o.clear();
+    return *this;
+  }
+
+  const T* data() const { return data_; }
+  std::size_t size() const { return size_; }
+  bool empty() const { return size_ == 0; }
+  const T& operator[](std::size_t i) const { return data_[i]; }
+  const T* begin() const { return data_; }
+  const T* end() const { return data_ + size_; }
+  /// Writable access to owned memory (a builder filling it in place); nullptr when borrowed.
+  T* owned_data() { return borrowed_ ? nullptr : owned_.data(); }
+  /// Whether the memory is borrowed (mapped) rather than owned.
+  bool borrowed() const { return borrowed_; }
+  /// Bytes the array takes: its capacity when owned, its size when borrowed.
+  std::size_t memory_bytes() const { return (borrowed_ ? size_ : owned_.capacity()) * sizeof(T); }
+
+  friend bool operator==(const Storage& a, const Storage& b) {
+    if (a.size_ != b.size_) return false;
+    for (std::size_t i = 0; i < a.size_; ++i)
+      if (!(a.data_[i] == b.data_[i])) return false;
+    return true;
+  }
+  friend bool operator!=(const Storage& a, const Storage& b) { return !(a == b); }
+
+ private:
+  void point_at_owned() {
+    data_ = owned_.data();
+    size_ = owned_.size();
+  }
+  void clear() {
+    owned_.clear();
+    data_ = nullptr;
+    size_ = 0;
+    borrowed_ = false;
+  }
+
+  std::vector<T> owned_;
+  const T* data_ = nullptr;
+  std::size_t size_ = 0;
+  bool borrowed_ = false;
+};
+
+}  // namespace kdspace::detail

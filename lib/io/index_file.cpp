@@ -1,0 +1,542 @@
+// The index file format: checking a file when it is opened, handing out its sections, and writing one
+// atomically (see kdspace/io/index_file.hpp for the layout).
+#include "kdspace/io/index_file.hpp"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <new>
+#include <string>
+#include <system_error>
+
+#include "crc32c.hpp"
+#include "kdspace/error.hpp"
+
+#if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "kdspace's index files are read and written in the machine's byte order, which must be little-endian"
+#endif
+
+namespace kdspace::io {
+namespace {
+
+constexpr unsigned char magic[8] = {0x89, 'K', 'D', 'X', 0x0D, 0x0A, 0x1A, 0x0A};
+constexpr std::uint32_t byte_order_mark = 0x01020304u;
+
+// Header fields (offsets from the top of kdspace/io/index_file.hpp).
+constexpr std::size_t at_version = 8, at_byte_order = 12, at_kind = 16, at_scalar = 20, at_metric = 24,
+                      at_sections = 28, at_dim = 32, at_count = 40, at_file_bytes = 48, at_table_crc = 56,
+                      at_header_crc = 60;
+
+template <class V>
+V get(const unsigned char* p) {
+  V v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+template <class V>
+void put(unsigned char* p, V v) {
+  std::memcpy(p, &v, sizeof v);
+}
+
+std::uint64_t align_up(std::uint64_t v) {
+  return (v + index_section_alignment - 1) / index_section_alignment * index_section_alignment;
+}
+
+std::string errno_text() {
+  return std::strerror(errno);
+}
+
+[[noreturn]] void fail_path(const std::string& path, const std::string& what) {
+  throw Error(path + ": " + what);
+}
+
+bool known_kind(std::uint32_t v) {
+  return v >= 1 && v <= 4;
+}
+
+// Memory aligned for any section type, for LoadMode::read and from_bytes.
+void* allocate_aligned(std::size_t bytes) {
+  return ::operator new (std::max<std::size_t>(bytes, 1), std::align_val_t{index_section_alignment});
+}
+void free_aligned(void* p) {
+  ::operator delete (p, std::align_val_t{index_section_alignment});
+}
+
+// An open file descriptor, closed on scope exit.
+struct Fd {
+  int fd = -1;
+  ~Fd() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+// Reads exactly n bytes at `offset`; false at a short read (the file shrank).
+bool read_at(int fd, void* dst, std::size_t n, std::uint64_t offset) {
+  auto* p = static_cast<unsigned char*>(dst);
+  while (n > 0) {
+    const ssize_t got =
+        ::pread(fd, p, std::min<std::size_t>(n, std::size_t{1} << 30), static_cast<off_t>(offset));
+    if (got < 0 && errno == EINTR) continue;
+    if (got <= 0) return false;
+    p += got;
+    n -= static_cast<std::size_t>(got);
+    offset += static_cast<std::uint64_t>(got);
+  }
+  return true;
+}
+
+void write_all(int fd, const void* src, std::size_t n) {
+  const auto* p = static_cast<const unsigned char*>(src);
+  while (n > 0) {
+    const ssize_t put_bytes = ::write(fd, p, std::min<std::size_t>(n, std::size_t{1} << 30));
+    if (put_bytes < 0 && errno == EINTR) continue;
+    if (put_bytes < 0) throw std::system_error(errno, std::generic_category());
+    p += put_bytes;
+    n -= static_cast<std::size_t>(put_bytes);
+  }
+}
+
+std::string hex(std::uint32_t v) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "0x%08x", v);
+  return buf;
+}
+
+}  // namespace
+
+// ---- names -----------------------------------------------------------------------------------------
+
+const char* name_of(IndexKind kind) {
+  switch (kind) {
+    case IndexKind::point_tree:
+      return "point tree";
+    case IndexKind::dynamic_point_tree:
+      return "updatable point tree";
+    case IndexKind::point_forest:
+      return "point forest";
+    case IndexKind::box_tree:
+      return "box tree";
+  }
+  return "unknown kind";
+}
+
+const char* name_of(SectionType type) {
+  switch (type) {
+    case SectionType::params:
+      return "params";
+    case SectionType::nodes:
+      return "nodes";
+    case SectionType::points:
+      return "points";
+    case SectionType::point_bytes:
+      return "point bytes";
+    case SectionType::order:
+      return "order";
+    case SectionType::ids:
+      return "ids";
+    case SectionType::removed:
+      return "removed";
+    case SectionType::dynamic_state:
+      return "dynamic state";
+    case SectionType::mean:
+      return "mean";
+    case SectionType::projection:
+      return "projection";
+    case SectionType::boxes:
+      return "boxes";
+    case SectionType::references:
+      return "references";
+    case SectionType::leaf_boxes:
+      return "leaf boxes";
+    case SectionType::bounds:
+      return "bounds";
+    case SectionType::leaf_blocks:
+      return "leaf blocks";
+    case SectionType::graph:
+      return "graph";
+  }
+  return "unknown";
+}
+
+const char* name_of(ScalarType type) {
+  switch (type) {
+    case ScalarType::none:
+      return "none";
+    case ScalarType::float32:
+      return "float32";
+    case ScalarType::float64:
+      return "float64";
+  }
+  return "unknown";
+}
+
+const char* name_of(MetricId metric) {
+  switch (metric) {
+    case MetricId::none:
+      return "none";
+    case MetricId::l2:
+      return "l2";
+    case MetricId::l1:
+      return "l1";
+    case MetricId::linf:
+      return "linf";
+    case MetricId::minkowski:
+      return "minkowski";
+  }
+  return "unknown";
+}
+
+std::uint64_t word_of(double v) {
+  return get<std::uint64_t>(reinterpret_cast<const unsigned char*>(&v));
+}
+double double_of(std::uint64_t word) {
+  return get<double>(reinterpret_cast<const unsigned char*>(&word));
+}
+
+// ---- opening -----------------------------------------------------------------------------------------
+
+std::shared_ptr<const IndexFile> IndexFile::open(const std::string& path, LoadMode mode,
+                                                 Checksums checksums) {
+  std::shared_ptr<IndexFile> file(new IndexFile());
+  file->path_ = path;
+  Fd fd{::open(path.c_str(), O_RDONLY | O_CLOEXEC)};
+  if (fd.fd < 0) fail_path(path, "cannot open: " + errno_text());
+  struct stat st {};
+  if (::fstat(fd.fd, &st) != 0) fail_path(path, "cannot open: " + errno_text());
+  if (S_ISDIR(st.st_mode)) fail_path(path, "is a directory, not an index file");
+  if (!S_ISREG(st.st_mode)) fail_path(path, "not a regular file");
+  const auto size = static_cast<std::uint64_t>(st.st_size);
+  if (size == 0) fail_path(path, "empty file, not an index");
+  if (size > static_cast<std::uint64_t>(SIZE_MAX)) fail_path(path, "file too large");
+  file->size_ = static_cast<std::size_t>(size);
+
+  // The magic first, so that a large file of another kind is neither mapped nor read.
+  unsigned char head[sizeof magic] = {};
+  const std::size_t head_bytes = std::min<std::size_t>(sizeof magic, file->size_);
+  if (!read_at(fd.fd, head, head_bytes, 0)) fail_path(path, "read error: " + errno_text());
+  if (std::memcmp(head, magic, head_bytes) != 0)
+    fail_path(path, "not a kdspace index file (bad magic bytes)");
+
+  if (mode == LoadMode::map) {
+    void* p = ::mmap(nullptr, file->size_, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd.fd, 0);
+    if (p == MAP_FAILED) fail_path(path, "cannot memory-map: " + errno_text());
+    file->bytes_ = static_cast<const unsigned char*>(p);
+    file->mapped_ = true;
+  } else {
+    file->buffer_ = allocate_aligned(file->size_);
+    file->bytes_ = static_cast<const unsigned char*>(file->buffer_);
+    if (!read_at(fd.fd, file->buffer_, file->size_, 0))
+      fail_path(path, "read error (the file changed while being read?): " + errno_text());
+  }
+  file->check(checksums);
+  return file;
+}
+
+std::shared_ptr<const IndexFile> IndexFile::from_bytes(const unsigned char* bytes, std::size_t size,
+                                                       const std::string& name) {
+  std::shared_ptr<IndexFile> file(new IndexFile());
+  file->path_ = name;
+  file->size_ = size;
+  file->buffer_ = allocate_aligned(size);
+  if (size > 0) std::memcpy(file->buffer_, bytes, size);
+  file->bytes_ = static_cast<const unsigned char*>(file->buffer_);
+  file->check(Checksums::now);
+  return file;
+}
+
+IndexFile::~IndexFile() {
+  if (mapped_) ::munmap(const_cast<unsigned char*>(bytes_), size_);
+  if (buffer_) free_aligned(buffer_);
+}
+
+void IndexFile::fail(const std::string& what) const {
+  fail_path(path_, what);
+}
+
+std::string IndexFile::describe(const SectionEntry& s) const {
+  return std::string("section '") + name_of(s.type) + "'" +
+         (s.part ? " of part " + std::to_string(s.part) : "") + " (" + std::to_string(s.length) +
+         " bytes at offset " + std::to_string(s.offset) + ")";
+}
+
+void IndexFile::check(Checksums checksums) {
+  const unsigned char* b = bytes_;
+  if (size_ == 0) fail("empty file, not an index");
+  if (std::memcmp(b, magic, std::min(size_, sizeof magic)) != 0)
+    fail("not a kdspace index file (bad magic bytes)");
+  if (size_ < index_header_bytes)
+    fail("truncated: " + std::to_string(size_) + " bytes, the header alone takes " +
+         std::to_string(index_header_bytes));
+
+  const auto version = get<std::uint32_t>(b + at_version);
+  const bool header_intact = io::detail::crc32c(b, at_header_crc) == get<std::uint32_t>(b + at_header_crc);
+  if (version != index_format_version)
+    fail("format version " + std::to_string(version) + ": this kdspace reads version " +
+         std::to_string(index_format_version) + (header_intact ? "" : " (or the header is damaged)"));
+  if (!header_intact) fail("header checksum mismatch: the file is damaged");
+  const auto mark = get<std::uint32_t>(b + at_byte_order);
+  if (mark != byte_order_mark)
+    fail("byte order mark " + hex(mark) + ": written on a machine of another byte order");
+
+  const auto kind = get<std::uint32_t>(b + at_kind);
+  const auto scalar = get<std::uint32_t>(b + at_scalar);
+  const auto metric = get<std::uint32_t>(b + at_metric);
+  if (!known_kind(kind)) fail("unknown index kind " + std::to_string(kind) + " (a newer kdspace wrote it?)");
+  if (scalar > 2) fail("unknown scalar type " + std::to_string(scalar));
+  if (metric > 4) fail("unknown metric " + std::to_string(metric));
+  info_.kind = static_cast<IndexKind>(kind);
+  info_.scalar = static_cast<ScalarType>(scalar);
+  info_.metric = static_cast<MetricId>(metric);
+  info_.dim = get<std::uint64_t>(b + at_dim);
+  info_.count = get<std::uint64_t>(b + at_count);
+  info_.file_bytes = get<std::uint64_t>(b + at_file_bytes);
+  if (info_.file_bytes > size_)
+    fail("truncated: the header says " + std::to_string(info_.file_bytes) + " bytes, the file has " +
+         std::to_string(size_));
+  if (info_.file_bytes < size_)
+    fail("the file has " + std::to_string(size_) + " bytes, its header says " +
+         std::to_string(info_.file_bytes) + " (extra bytes at the end)");
+
+  const auto sections = get<std::uint32_t>(b + at_sections);
+  if (sections > max_sections)
+    fail("the header lists " + std::to_string(sections) + " sections (at most " +
+         std::to_string(max_sections) + ")");
+  const std::uint64_t table_end = index_header_bytes + std::uint64_t{sections} * index_section_entry_bytes;
+  if (table_end > size_) fail("truncated: the section table runs past the end of the file");
+  if (io::detail::crc32c(b + index_header_bytes, static_cast<std::size_t>(table_end - index_header_bytes)) !=
+      get<std::uint32_t>(b + at_table_crc))
+    fail("section table checksum mismatch: the file is damaged");
+
+  info_.sections.clear();
+  for (std::uint32_t i = 0; i < sections; ++i) {
+    const unsigned char* e = b + index_header_bytes + std::size_t{i} * index_section_entry_bytes;
+    SectionEntry s;
+    s.type = static_cast<SectionType>(get<std::uint32_t>(e));
+    s.part = get<std::uint32_t>(e + 4);
+    s.version = get<std::uint32_t>(e + 8);
+    s.item_bytes = get<std::uint32_t>(e + 12);
+    s.offset = get<std::uint64_t>(e + 16);
+    s.length = get<std::uint64_t>(e + 24);
+    s.crc = get<std::uint32_t>(e + 32);
+    const std::string where = "section " + std::to_string(i + 1) + " of the table";
+    if (get<std::uint32_t>(e + 36) != 0) fail(where + ": reserved field is not 0");
+    if (s.offset % index_section_alignment != 0 || s.offset < table_end || s.offset > size_ ||
+        s.length > size_ - s.offset)
+      fail(where + ": " + std::to_string(s.length) + " bytes at offset " + std::to_string(s.offset) +
+           " do not lie inside the file's " + std::to_string(size_) +
+           " bytes past its table, 64-byte aligned");
+    if (s.item_bytes == 0 || s.length % s.item_bytes != 0)
+      fail(where + ": length " + std::to_string(s.length) + " is not a whole number of " +
+           std::to_string(s.item_bytes) + "-byte items");
+    for (const SectionEntry& other : info_.sections)
+      if (other.type == s.type && other.part == s.part) fail(where + ": " + describe(s) + " appears twice");
+    info_.sections.push_back(s);
+  }
+
+  // Sections apart, and every byte outside them zero: no byte of the file goes unchecked.
+  std::vector<SectionEntry> by_offset = info_.sections;
+  std::sort(by_offset.begin(), by_offset.end(),
+            [](const SectionEntry& x, const SectionEntry& y) { return x.offset < y.offset; });
+  std::uint64_t covered = table_end;
+  auto check_gap = [&](std::uint64_t end) {
+    for (std::uint64_t at = covered; at < end; ++at)
+      if (b[at] != 0) fail("byte " + std::to_string(at) + " between sections is not 0: the file is damaged");
+  };
+  for (const SectionEntry& s : by_offset) {
+    if (s.offset < covered) fail(describe(s) + " overlaps the section before it");
+    check_gap(s.offset);
+    covered = s.offset + s.length;
+  }
+  check_gap(size_);
+
+  if (checksums == Checksums::now) verify_checksums();
+}
+
+void IndexFile::verify_checksums() const {
+  for (const SectionEntry& s : info_.sections)
+    if (io::detail::crc32c(bytes_ + s.offset, static_cast<std::size_t>(s.length)) != s.crc)
+      fail(describe(s) + ": checksum mismatch: the file is damaged");
+}
+
+const SectionEntry* IndexFile::find(SectionType type, std::uint32_t part) const {
+  for (const SectionEntry& s : info_.sections)
+    if (s.type == type && s.part == part) return &s;
+  return nullptr;
+}
+
+const SectionEntry& IndexFile::section(SectionType type, std::uint32_t part, std::uint32_t version,
+                                       std::size_t item_bytes, std::size_t count) const {
+  const SectionEntry* s = find(type, part);
+  if (!s)
+    fail(std::string("no section '") + name_of(type) + "'" +
+         (part ? " for part " + std::to_string(part) : "") + " in this " + name_of(info_.kind));
+  if (s->version != version)
+    fail(describe(*s) + ": layout version " + std::to_string(s->version) + ", this kdspace reads version " +
+         std::to_string(version));
+  if (s->item_bytes != item_bytes)
+    fail(describe(*s) + ": items of " + std::to_string(s->item_bytes) + " bytes, expected " +
+         std::to_string(item_bytes));
+  if (count != any_count && s->length / item_bytes != count)
+    fail(describe(*s) + ": " + std::to_string(s->length / item_bytes) + " items, expected " +
+         std::to_string(count));
+  return *s;
+}
+
+std::vector<std::uint64_t> IndexFile::words(SectionType type, std::uint32_t part, std::uint32_t version,
+                                            std::size_t min_words) const {
+  const kdspace::detail::Storage<std::uint64_t> w = array<std::uint64_t>(type, part, version);
+  if (w.size() < min_words)
+    fail(describe(*find(type, part)) + ": " + std::to_string(w.size()) + " words, expected at least " +
+         std::to_string(min_words));
+  return std::vector<std::uint64_t>(w.begin(), w.end());
+}
+
+// ---- writing -----------------------------------------------------------------------------------------
+
+IndexWriter::IndexWriter(IndexKind kind, ScalarType scalar, MetricId metric, std::uint64_t dim,
+                         std::uint64_t count) {
+  info_.kind = kind;
+  info_.scalar = scalar;
+  info_.metric = metric;
+  info_.dim = dim;
+  info_.count = count;
+}
+
+void IndexWriter::add_bytes(SectionType type, std::uint32_t part, std::uint32_t version,
+                            std::size_t item_bytes, const void* data, std::size_t bytes) {
+  Pending p;
+  p.entry.type = type;
+  p.entry.part = part;
+  p.entry.version = version;
+  p.entry.item_bytes = static_cast<std::uint32_t>(item_bytes);
+  p.entry.length = bytes;
+  p.data = data;
+  pending_.push_back(p);
+}
+
+const void* IndexWriter::keep(const void* data, std::size_t bytes) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  kept_.push_back(std::make_unique<std::vector<unsigned char>>(p, p + bytes));
+  return kept_.back()->data();
+}
+
+std::vector<unsigned char> IndexWriter::head() const {
+  const std::size_t sections = pending_.size();
+  if (sections > max_sections)
+    throw Error("an index of more than " + std::to_string(max_sections) + " sections");
+  const std::uint64_t table_end = index_header_bytes + sections * index_section_entry_bytes;
+  std::vector<unsigned char> h(static_cast<std::size_t>(table_end), 0);
+  std::uint64_t offset = table_end;
+  for (std::size_t i = 0; i < sections; ++i) {
+    SectionEntry e = pending_[i].entry;
+    e.offset = offset = align_up(offset);
+    e.crc = io::detail::crc32c(pending_[i].data, static_cast<std::size_t>(e.length));
+    offset += e.length;
+    unsigned char* p = h.data() + index_header_bytes + i * index_section_entry_bytes;
+    put(p, static_cast<std::uint32_t>(e.type));
+    put(p + 4, e.part);
+    put(p + 8, e.version);
+    put(p + 12, e.item_bytes);
+    put(p + 16, e.offset);
+    put(p + 24, e.length);
+    put(p + 32, e.crc);
+  }
+  std::memcpy(h.data(), magic, sizeof magic);
+  put(h.data() + at_version, index_format_version);
+  put(h.data() + at_byte_order, byte_order_mark);
+  put(h.data() + at_kind, static_cast<std::uint32_t>(info_.kind));
+  put(h.data() + at_scalar, static_cast<std::uint32_t>(info_.scalar));
+  put(h.data() + at_metric, static_cast<std::uint32_t>(info_.metric));
+  put(h.data() + at_sections, static_cast<std::uint32_t>(sections));
+  put(h.data() + at_dim, info_.dim);
+  put(h.data() + at_count, info_.count);
+  put(h.data() + at_file_bytes, offset);
+  put(h.data() + at_table_crc, io::detail::crc32c(h.data() + index_header_bytes,
+                                                  static_cast<std::size_t>(table_end - index_header_bytes)));
+  put(h.data() + at_header_crc, io::detail::crc32c(h.data(), at_header_crc));
+  return h;
+}
+
+std::vector<unsigned char> IndexWriter::bytes() const {
+  std::vector<unsigned char> out = head();
+  for (const Pending& p : pending_) {
+    out.resize(static_cast<std::size_t>(align_up(out.size())), 0);
+    const auto* data = static_cast<const unsigned char*>(p.data);
+    out.insert(out.end(), data, data + p.entry.length);
+  }
+  return out;
+}
+
+void IndexWriter::write(const std::string& path) const {
+  const std::vector<unsigned char> h = head();
+  const std::filesystem::path target(path);
+  const std::string folder = target.has_parent_path() ? target.parent_path().string() : std::string(".");
+
+  // A name of our own beside the target: O_EXCL makes sure no one else's file is overwritten.
+  static std::atomic<unsigned> counter{0};
+  std::string temp;
+  Fd out;
+  for (int attempt = 0; out.fd < 0; ++attempt) {
+    temp = path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter++);
+    out.fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (out.fd < 0 && (errno != EEXIST || attempt > 100))
+      fail_path(path, "cannot save: cannot create " + temp + ": " + errno_text());
+  }
+  try {
+    write_all(out.fd, h.data(), h.size());
+    std::uint64_t offset = h.size();
+    const unsigned char zeros[index_section_alignment] = {};
+    for (const Pending& p : pending_) {
+      const std::uint64_t start = align_up(offset);
+      write_all(out.fd, zeros, static_cast<std::size_t>(start - offset));
+      write_all(out.fd, p.data, static_cast<std::size_t>(p.entry.length));
+      offset = start + p.entry.length;
+    }
+    if (::fsync(out.fd) != 0) throw std::system_error(errno, std::generic_category());
+    const int fd = out.fd;
+    out.fd = -1;
+    if (::close(fd) != 0) throw std::system_error(errno, std::generic_category());
+  } catch (const std::system_error& e) {
+    ::unlink(temp.c_str());
+    fail_path(path, "cannot save: writing " + temp + " failed: " + e.code().message() +
+                        " (the old file, if any, is unchanged)");
+  }
+  if (::rename(temp.c_str(), path.c_str()) != 0) {
+    const std::string why = errno_text();
+    ::unlink(temp.c_str());
+    fail_path(path, "cannot save: cannot rename " + temp + " to it: " + why);
+  }
+  // The rename is durable once the folder is on disk too.
+  Fd dir{::open(folder.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC)};
+  if (dir.fd >= 0) ::fsync(dir.fd);
+}
+
+// ---- resealing -----------------------------------------------------------------------------------------
+
+void reseal_index_bytes(std::vector<unsigned char>& bytes) {
+  if (bytes.size() < index_header_bytes || std::memcmp(bytes.data(), magic, sizeof magic) != 0) return;
+  unsigned char* b = bytes.data();
+  const auto sections = get<std::uint32_t>(b + at_sections);
+  if (sections > max_sections) return;
+  const std::uint64_t table_end = index_header_bytes + std::uint64_t{sections} * index_section_entry_bytes;
+  if (table_end > bytes.size()) return;
+  for (std::uint32_t i = 0; i < sections; ++i) {
+    unsigned char* e = b + index_header_bytes + std::size_t{i} * index_section_entry_bytes;
+    const auto offset = get<std::uint64_t>(e + 16), length = get<std::uint64_t>(e + 24);
+    if (offset <= bytes.size() && length <= bytes.size() - offset)
+      put(e + 32, io::detail::crc32c(b + offset, static_cast<std::size_t>(length)));
+  }
+  put(b + at_table_crc,
+      io::detail::crc32c(b + index_header_bytes, static_cast<std::size_t>(table_end - index_header_bytes)));
+  put(b + at_header_crc, io::detail::crc32c(b, at_header_crc));
+}
+
+}  // namespace kdspace::io

@@ -1,0 +1,385 @@
+// Tests of the index file format (kdspace/io/index_file.hpp) through PointTree files: round trips by
+// memory-mapping and by reading, the checksum, every single-byte change and every truncation of a
+// file, changes that keep the checksums valid (only the structural checks stand in their way), and
+// atomic saving under a full disk and a crash.
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "../lib/io/crc32c.hpp"
+#include "kdspace/error.hpp"
+#include "kdspace/io/index.hpp"
+#include "support.hpp"
+
+namespace fs = std::filesystem;
+namespace io = kdspace::io;
+using kdspace::PointTree;
+using kdspace_test::Shape;
+
+namespace {
+
+class TempDir : public kdspace_test::ScratchDir {
+ public:
+  TempDir() : ScratchDir("kdspace-index-test-", true) {}
+};
+
+std::vector<unsigned char> file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::vector<unsigned char>(std::istreambuf_iterator<char>(in), {});
+}
+
+void write_bytes(const std::string& path, const std::vector<unsigned char>& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+}
+
+// The message of the kdspace::Error that f throws; "" (and a failed check) when it throws none.
+template <class F>
+std::string error_message(F&& f) {
+  try {
+    f();
+  } catch (const kdspace::Error& e) {
+    return e.what();
+  }
+  FAIL_CHECK("no kdspace::Error was thrown");
+  return "";
+}
+
+template <class Tree>
+void require_same_nodes(const Tree& a, const Tree& b) {
+  REQUIRE(a.node_count() == b.node_count());
+  REQUIRE(std::memcmp(a.nodes().data(), b.nodes().data(), a.node_count() * sizeof(typename Tree::Node)) == 0);
+}
+
+// Every answer of `got` equals `want`'s: k-NN (batch and single), radius and box.
+template <class Tree>
+void require_same_answers(const Tree& got, const Tree& want,
+                          const std::vector<typename Tree::Scalar>& queries) {
+  using T = typename Tree::Scalar;
+  const std::size_t d = want.dim(), nq = queries.size() / d;
+  for (std::size_t k : {std::size_t{1}, std::size_t{7}, want.size()}) {
+    const auto a = got.knn_batch(queries.data(), nq, k, {}, 1);
+    const auto b = want.knn_batch(queries.data(), nq, k, {}, 1);
+    REQUIRE(a.neighbors == b.neighbors);
+  }
+  const auto r = got.radius_batch(queries.data(), nq, T(0.3), std::numeric_limits<std::size_t>::max(), 1);
+  const auto s = want.radius_batch(queries.data(), nq, T(0.3), std::numeric_limits<std::size_t>::max(), 1);
+  REQUIRE(r.offsets == s.offsets);
+  REQUIRE(r.neighbors == s.neighbors);
+  std::vector<T> lo(queries.begin(), queries.begin() + static_cast<long>(d)), hi = lo;
+  for (std::size_t a = 0; a < d; ++a) lo[a] -= T(0.5), hi[a] += T(0.5);
+  REQUIRE(got.box(lo.data(), hi.data()) == want.box(lo.data(), hi.data()));
+}
+
+// A small tree file for the corruption tests, and the queries that check it.
+struct SmallIndex {
+  std::vector<float> points = kdspace_test::make_points<float>(Shape::clustered, 60, 3, 5);
+  std::vector<float> queries = kdspace_test::make_queries(points, 60, 3, 20, 6);
+  kdspace::BuildParams params = [] {
+    kdspace::BuildParams p;
+    p.leaf_size = 4;
+    return p;
+  }();
+  PointTree<float> tree{points.data(), 60, 3, params};
+};
+
+}  // namespace
+
+TEST_CASE("index: CRC-32C has the standard check value, in hardware and in software", "[index]") {
+  const char* check = "123456789";
+  CHECK(io::detail::crc32c(check, 9) == 0xE3069283u);
+  CHECK(io::detail::crc32c_portable(check, 9) == 0xE3069283u);
+  CHECK(io::detail::crc32c("", 0) == 0u);
+  std::mt19937 rng(3);
+  std::vector<unsigned char> data(100000);
+  for (auto& b : data) b = static_cast<unsigned char>(rng());
+  // Lengths around the three-stream blocks (3 x 4096) and their tails, at odd starts.
+  for (std::size_t n : {1, 7, 8, 9, 4095, 12287, 12288, 12289, 24583, 99990})
+    for (std::size_t start : {0, 1, 5}) {
+      CAPTURE(n, start);
+      REQUIRE(io::detail::crc32c(data.data() + start, n) ==
+              io::detail::crc32c_portable(data.data() + start, n));
+    }
+}
+
+TEMPLATE_TEST_CASE("index: a saved point tree loads, mapped or read, with the same nodes and answers",
+                   "[index]", float, double) {
+  using T = TestType;
+  TempDir tmp;
+  for (Shape shape :
+       {Shape::uniform, Shape::clustered, Shape::duplicates, Shape::identical, Shape::flat, Shape::grid}) {
+    for (std::size_t dim : {1, 3, 9}) {
+      for (auto position : {kdspace::PositionRule::median, kdspace::PositionRule::middle,
+                            kdspace::PositionRule::sliding_midpoint}) {
+        CAPTURE(kdspace_test::name(shape), dim, kdspace_test::name(position));
+        const std::size_t n = 700;
+        const auto points = kdspace_test::make_points<T>(shape, n, dim, 11);
+        const auto queries = kdspace_test::make_queries(points, n, dim, 20, 12);
+        kdspace::BuildParams params;
+        params.position = position;
+        params.leaf_size = 5;
+        params.axis = kdspace::AxisRule::cycle;
+        const PointTree<T> built(points.data(), n, dim, params);
+        const std::string path = tmp.file("tree.kdx");
+        io::save(path, built);
+        for (auto mode : {io::LoadMode::map, io::LoadMode::read}) {
+          const auto loaded = io::load_point_tree<T>(path, mode);
+          REQUIRE(loaded.nodes().borrowed());
+          REQUIRE(loaded.size() == n);
+          REQUIRE(loaded.depth() == built.depth());
+          REQUIRE(loaded.leaf_count() == built.leaf_count());
+          REQUIRE(loaded.params().position == position);
+          REQUIRE(loaded.params().axis == kdspace::AxisRule::cycle);
+          REQUIRE(loaded.params().leaf_size == 5);
+          require_same_nodes(loaded, built);
+          require_same_answers(loaded, built, queries);
+        }
+      }
+    }
+  }
+}
+
+TEST_CASE("index: metrics, compile-time dimensions and the blocked scan survive a round trip", "[index]") {
+  TempDir tmp;
+  const std::size_t n = 3000;
+  const auto points = kdspace_test::make_points<float>(Shape::uniform, n, 3, 21);
+  const auto queries = kdspace_test::make_queries(points, n, 3, 100, 22);
+  {
+    const PointTree<float, 3> built(points.data(), n, 3);
+    io::save(tmp.file("fixed.kdx"), built);
+    const auto loaded = io::load_point_tree<float, 3>(tmp.file("fixed.kdx"));
+    require_same_answers(loaded, built, queries);
+    // The same file serves a tree of run-time dimension.
+    const auto dynamic = io::load_point_tree<float>(tmp.file("fixed.kdx"));
+    REQUIRE(dynamic.dim() == 3);
+  }
+  {
+    const PointTree<float, kdspace::Dynamic, kdspace::Linf> built(points.data(), n, 3);
+    io::save(tmp.file("linf.kdx"), built);
+    require_same_answers(io::load_point_tree<float, kdspace::Dynamic, kdspace::Linf>(tmp.file("linf.kdx")),
+                         built, queries);
+  }
+  {
+    const std::vector<double> wider(points.begin(), points.end());
+    const std::vector<double> wider_queries(queries.begin(), queries.end());
+    const PointTree<double, kdspace::Dynamic, kdspace::Minkowski> built(wider.data(), n, 3, {},
+                                                                       kdspace::Minkowski(3.5));
+    io::save(tmp.file("minkowski.kdx"), built);
+    const auto loaded = io::load_point_tree<double, kdspace::Dynamic, kdspace::Minkowski>(tmp.file("minkowski.kdx"));
+    REQUIRE(loaded.metric().p == 3.5);
+    require_same_answers(loaded, built, wider_queries);
+  }
+  {
+    const auto wide = kdspace_test::make_points<float>(Shape::uniform, n, 48, 23);
+    const auto wide_queries = kdspace_test::make_queries(wide, n, 48, 70, 24);
+    const PointTree<float> built(wide.data(), n, 48);
+    io::save(tmp.file("wide.kdx"), built);
+    const auto loaded = io::load_point_tree<float>(tmp.file("wide.kdx"));
+    kdspace::SearchParams scan;
+    scan.batch_method = kdspace::BatchMethod::scan;
+    REQUIRE(loaded.knn_batch(wide_queries.data(), 70, 10, scan, 1).neighbors ==
+            built.knn_batch(wide_queries.data(), 70, 10, scan, 1).neighbors);
+  }
+}
+
+TEST_CASE("index: a file of another kind, type, metric or dimension is refused by name", "[index][errors]") {
+  TempDir tmp;
+  const auto points = kdspace_test::make_points<float>(Shape::uniform, 100, 3, 1);
+  io::save(tmp.file("t.kdx"), PointTree<float>(points.data(), 100, 3));
+  const std::string path = tmp.file("t.kdx");
+  CHECK(error_message([&] { io::load_point_tree<double>(path); }) ==
+        path + ": holds float32 coordinates, expected float64");
+  CHECK(error_message([&] { io::load_point_tree<float, kdspace::Dynamic, kdspace::L1>(path); }) ==
+        path + ": is built for metric l2, expected l1");
+  CHECK(error_message([&] { io::load_point_tree<float, 2>(path); }) == path + ": dimension 3, expected 2");
+  CHECK(error_message([&] { io::load_box_tree(path); }) == path + ": holds a point tree, not a box tree");
+  CHECK(error_message([&] { io::load_point_forest<float>(path); }) ==
+        path + ": holds a point tree, not a point forest");
+  CHECK(error_message([&] { io::load_point_tree<float>(tmp.file("missing.kdx")); }) ==
+        tmp.file("missing.kdx") + ": cannot open: No such file or directory");
+  write_bytes(tmp.file("points.fvecs"), {3, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12});
+  CHECK(error_message([&] { io::load_point_tree<float>(tmp.file("points.fvecs")); }) ==
+        tmp.file("points.fvecs") + ": not a kdspace index file (bad magic bytes)");
+  write_bytes(tmp.file("empty.kdx"), {});
+  CHECK(error_message([&] { io::load_point_tree<float>(tmp.file("empty.kdx")); }) ==
+        tmp.file("empty.kdx") + ": empty file, not an index");
+  CHECK(error_message([&] { io::load_point_tree<float>(tmp.path()); }) ==
+        tmp.path() + ": is a directory, not an index file");
+
+  // A newer format version (resealed, so that only the version differs).
+  std::vector<unsigned char> bytes = file_bytes(path);
+  bytes[8] = 2;
+  io::reseal_index_bytes(bytes);
+  write_bytes(tmp.file("v2.kdx"), bytes);
+  CHECK(error_message([&] { io::load_point_tree<float>(tmp.file("v2.kdx")); }) ==
+        tmp.file("v2.kdx") + ": format version 2: this kdspace reads version 1");
+}
+
+TEST_CASE("index: every single changed byte and every truncation of a file is a clear error",
+          "[index][errors]") {
+  TempDir tmp;
+  SmallIndex small;
+  const std::string good = tmp.file("good.kdx"), bad = tmp.file("bad.kdx");
+  io::save(good, small.tree);
+  const std::vector<unsigned char> bytes = file_bytes(good);
+  REQUIRE(bytes.size() > 1000);
+  // A CRC catches any damage of up to 32 bits in a row: every byte, changed in any way, is caught.
+  for (std::size_t at = 0; at < bytes.size(); ++at) {
+    for (int change : {0x01, 0x80, 0xff}) {
+      std::vector<unsigned char> damaged = bytes;
+      damaged[at] = static_cast<unsigned char>(damaged[at] ^ change);
+      write_bytes(bad, damaged);
+      CAPTURE(at, change);
+      for (auto mode : {io::LoadMode::map, io::LoadMode::read}) {
+        const std::string message = error_message([&] { io::load_point_tree<float>(bad, mode); });
+        REQUIRE(message.rfind(bad + ": ", 0) == 0);
+      }
+    }
+  }
+  for (std::size_t size = 0; size < bytes.size(); ++size) {
+    write_bytes(bad, std::vector<unsigned char>(bytes.begin(), bytes.begin() + static_cast<long>(size)));
+    CAPTURE(size);
+    const std::string message = error_message([&] { io::load_point_tree<float>(bad); });
+    REQUIRE(message.rfind(bad + ": ", 0) == 0);
+  }
+  std::vector<unsigned char> longer = bytes;
+  longer.push_back(0);
+  write_bytes(bad, longer);
+  CHECK(error_message([&] { io::load_point_tree<float>(bad); }) ==
+        bad + ": the file has " + std::to_string(bytes.size() + 1) + " bytes, its header says " +
+            std::to_string(bytes.size()) + " (extra bytes at the end)");
+  std::vector<unsigned char> flipped = bytes;
+  flipped[bytes.size() - 1] ^= 1;
+  write_bytes(bad, flipped);
+  CHECK(error_message([&] {
+          io::load_point_tree<float>(bad);
+        }).find("checksum mismatch: the file is damaged") != std::string::npos);
+}
+
+TEST_CASE(
+    "index: changes that keep the checksums valid are caught by the structural checks, or answer exactly",
+    "[index][errors]") {
+  // Resealing recomputes every checksum after a change, as a forger could: what still loads must be
+  // a sound tree, and a sound tree answers as brute force over its own points.
+  TempDir tmp;
+  SmallIndex small;
+  const std::string good = tmp.file("good.kdx"), bad = tmp.file("bad.kdx");
+  io::save(good, small.tree);
+  const std::vector<unsigned char> bytes = file_bytes(good);
+  std::mt19937 rng(17);
+  std::size_t refused = 0, loaded = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    std::vector<unsigned char> changed = bytes;
+    const int changes = 1 + trial % 3;
+    for (int c = 0; c < changes; ++c) {
+      const std::size_t at = std::uniform_int_distribution<std::size_t>(0, bytes.size() - 1)(rng);
+      changed[at] = static_cast<unsigned char>(trial % 2 ? changed[at] ^ (1u << (rng() % 8)) : rng());
+    }
+    io::reseal_index_bytes(changed);
+    write_bytes(bad, changed);
+    CAPTURE(trial);
+    try {
+      const auto tree = io::load_point_tree<float>(bad);
+      ++loaded;
+      const auto parts = tree.parts();
+      std::vector<float> rows(tree.size() * 3);  // the loaded points, by original index
+      for (std::size_t r = 0; r < tree.size(); ++r)
+        std::copy_n(parts.points.data() + r * 3, 3, rows.begin() + static_cast<long>(parts.order[r] * 3));
+      const auto answers = tree.knn_batch(small.queries.data(), 20, 5, {}, 1);
+      REQUIRE(kdspace_test::differs_from_brute_force(answers, rows, tree.size(), 3, small.queries, 5) == "");
+    } catch (const kdspace::Error& e) {
+      ++refused;
+      REQUIRE(std::string(e.what()).rfind(bad + ": ", 0) == 0);
+    }
+  }
+  CHECK(refused > 1000);
+  CHECK(loaded > 100);  // changes of coordinates that keep the tree sound
+}
+
+TEST_CASE("index: a full disk mid-save leaves the old file intact, and no temporary file",
+          "[index][errors]") {
+  TempDir tmp;
+  const std::string path = tmp.file("tree.kdx");
+  SmallIndex small;
+  io::save(path, small.tree);
+  const std::vector<unsigned char> before = file_bytes(path);
+  const auto big = kdspace_test::make_points<float>(Shape::uniform, 20000, 3, 2);
+  const PointTree<float> bigger(big.data(), 20000, 3);
+
+  // A file size limit makes write() fail with EFBIG part way, as a full disk fails with ENOSPC.
+  struct rlimit old_limit {};
+  REQUIRE(getrlimit(RLIMIT_FSIZE, &old_limit) == 0);
+  const auto old_handler = signal(SIGXFSZ, SIG_IGN);
+  struct rlimit small_limit = old_limit;
+  small_limit.rlim_cur = 100000;
+  REQUIRE(setrlimit(RLIMIT_FSIZE, &small_limit) == 0);
+  const std::string message = error_message([&] { io::save(path, bigger); });
+  setrlimit(RLIMIT_FSIZE, &old_limit);
+  signal(SIGXFSZ, old_handler);
+
+  CHECK(message.rfind(path + ": cannot save: writing ", 0) == 0);
+  CHECK(message.find("(the old file, if any, is unchanged)") != std::string::npos);
+  CHECK(file_bytes(path) == before);
+  require_same_answers(io::load_point_tree<float>(path), small.tree, small.queries);
+  std::size_t files = 0;
+  for (const auto& entry : fs::directory_iterator(fs::path(path).parent_path()))
+    files += entry.is_regular_file();
+  CHECK(files == 1);
+}
+
+TEST_CASE("index: a process killed mid-save leaves the old file intact", "[index][errors]") {
+  TempDir tmp;
+  const std::string path = tmp.file("tree.kdx");
+  SmallIndex small;
+  io::save(path, small.tree);
+  const std::vector<unsigned char> before = file_bytes(path);
+  const auto big = kdspace_test::make_points<float>(Shape::uniform, 20000, 3, 2);
+  const PointTree<float> bigger(big.data(), 20000, 3);
+
+  const pid_t child = fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    // The file size limit's signal kills the child part way through the write, like a crash.
+    struct rlimit limit {};
+    getrlimit(RLIMIT_FSIZE, &limit);
+    limit.rlim_cur = 100000;
+    setrlimit(RLIMIT_FSIZE, &limit);
+    signal(SIGXFSZ, SIG_DFL);
+    try {
+      io::save(path, bigger);
+    } catch (...) {
+    }
+    _exit(0);  // not reached when the signal kills it
+  }
+  int status = 0;
+  REQUIRE(waitpid(child, &status, 0) == child);
+  CHECK(WIFSIGNALED(status));
+  CHECK(file_bytes(path) == before);
+  require_same_answers(io::load_point_tree<float>(path), small.tree, small.queries);
+  // Saving again works, and replaces the file whole.
+  io::save(path, bigger);
+  REQUIRE(io::load_point_tree<float>(path).size() == 20000);
+}
+
+TEST_CASE("index: a mapped tree stays valid when the file is saved over", "[index]") {
+  TempDir tmp;
+  const std::string path = tmp.file("tree.kdx");
+  SmallIndex small;
+  io::save(path, small.tree);
+  const auto mapped = io::load_point_tree<float>(path);
+  const auto other = kdspace_test::make_points<float>(Shape::uniform, 500, 3, 9);
+  io::save(path, PointTree<float>(other.data(), 500, 3));
+  require_same_answers(mapped, small.tree, small.queries);
+  REQUIRE(io::load_point_tree<float>(path).size() == 500);
+}
