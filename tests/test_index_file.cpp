@@ -121,7 +121,7 @@ TEMPLATE_TEST_CASE("index: a saved point tree loads, mapped or read, with the sa
        {Shape::uniform, Shape::clustered, Shape::duplicates, Shape::identical, Shape::flat, Shape::grid}) {
     for (std::size_t dim : {1, 3, 9}) {
       for (auto position : {kdspace::PositionRule::median, kdspace::PositionRule::middle,
-                            kdspace::PositionRule::sliding_midpoint}) {
+                            kdspace::PositionRule::sliding_midpoint, kdspace::PositionRule::midpoint}) {
         CAPTURE(kdspace_test::name(shape), dim, kdspace_test::name(position));
         const std::size_t n = 700;
         const auto points = kdspace_test::make_points<T>(shape, n, dim, 11);

@@ -105,7 +105,6 @@ Inputs<T, B> read_inputs(const SearchJob& job) {
   return in;
 }
 
-
 // The trees a dual-tree join takes: PointTrees of the metrics it has rules for (not Minkowski of
 // another order, which only a loaded index brings here; not a DynamicPointTree).
 template <class Tree>

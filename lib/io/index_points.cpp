@@ -33,9 +33,10 @@ void expect_header(const IndexFile& file, const std::vector<IndexKind>& kinds, S
 }
 
 std::vector<std::uint64_t> point_tree_params(const BuildParams& p, double metric_parameter) {
-  const std::uint64_t position = p.position == PositionRule::median   ? 0
-                                 : p.position == PositionRule::middle ? 1
-                                                                      : 2;
+  const std::uint64_t position = p.position == PositionRule::median             ? 0
+                                 : p.position == PositionRule::middle           ? 1
+                                 : p.position == PositionRule::sliding_midpoint ? 2
+                                                                                : 3;
   return {p.axis == AxisRule::cycle ? 0u : 1u, position, p.leaf_size, p.max_depth, word_of(metric_parameter)};
 }
 
@@ -45,7 +46,7 @@ double read_metric_parameter(const IndexFile& file) {
 
 BuildParams read_point_tree_params(const IndexFile& file) {
   const std::vector<std::uint64_t> w = file.words(SectionType::params, 0, 1, 5);
-  if (w[0] > 1 || w[1] > 2 || w[2] == 0 || w[2] > (std::uint64_t{1} << 30) || w[3] > 256)
+  if (w[0] > 1 || w[1] > 3 || w[2] == 0 || w[2] > (std::uint64_t{1} << 30) || w[3] > 256)
     file.fail("build parameters out of range (axis " + std::to_string(w[0]) + ", position " +
               std::to_string(w[1]) + ", leaf size " + std::to_string(w[2]) + ", max depth " +
               std::to_string(w[3]) + ")");
@@ -53,7 +54,8 @@ BuildParams read_point_tree_params(const IndexFile& file) {
   p.axis = w[0] == 0 ? AxisRule::cycle : AxisRule::max_spread;
   p.position = w[1] == 0   ? PositionRule::median
                : w[1] == 1 ? PositionRule::middle
-                           : PositionRule::sliding_midpoint;
+               : w[1] == 2 ? PositionRule::sliding_midpoint
+                           : PositionRule::midpoint;
   p.leaf_size = static_cast<std::size_t>(w[2]);
   p.max_depth = static_cast<std::size_t>(w[3]);
   return p;
