@@ -43,6 +43,7 @@ void load_forest(const File& file) {
   const auto forest = io::load_point_forest<T>(file);
   std::vector<T> q(forest.dim(), T(3));
   forest.knn(q.data(), std::min<std::size_t>(2, forest.size()), {kdspace::unlimited_checks, 0});
+  if (forest.has_graph()) forest.knn(q.data(), std::min<std::size_t>(2, forest.size()), {kdspace::unlimited_checks, 0, 4});
 }
 
 void load(const File& file) {

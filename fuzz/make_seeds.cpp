@@ -120,7 +120,9 @@ int main(int argc, char** argv) {
     index_seeds("forest", tmp);
     std::vector<float> bytes(20 * 4);
     for (std::size_t i = 0; i < bytes.size(); ++i) bytes[i] = float((i * 53) % 256);
-    const kdspace::ForestSearchParams tuned{12, 1};
+    forest.graph = kdspace::GraphMode::on;  // the graph section too
+    forest.graph_degree = 4;
+    const kdspace::ForestSearchParams tuned{12, 1, 6};
     io::save(tmp, kdspace::PointForest<float>(bytes.data(), 20, 4, forest), &tuned);
     index_seeds("forest-bytes", tmp);
     io::save(tmp, kdspace::BoxTree(boxes));
