@@ -1,0 +1,99 @@
+// How the collision queries see a BoxTree. This is the one file of lib/collide/ that knows the tree's
+// layout (its nodes, the references of a leaf and the boxes of those references, through BoxTree's
+// const accessors), so that a change of layout is followed here and nowhere else in lib/collide/.
+//
+// It also holds the cells of the nodes and the ownership rule that lets every overlapping pair be
+// reported once although a box may be referenced by several leaves (see `owns`).
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "kdspace/box.hpp"
+#include "kdspace/boxes/box_tree.hpp"
+
+namespace kdspace::detail {
+
+using NodeId = std::uint32_t;
+
+class TreeAccess {
+ public:
+  explicit TreeAccess(const BoxTree& tree)
+      : nodes_(tree.nodes().data()),
+        ids_(tree.references().data()),
+        boxes_(tree.reference_boxes().data()),
+        root_cell_(tree.bounds()),
+        empty_(tree.size() == 0) {}
+
+  /// A tree of no boxes: every query finds nothing (its root cell is empty, lo > hi).
+  bool empty() const { return empty_; }
+  static constexpr NodeId root() { return 0; }
+  /// The cell of the root: it holds every box (the union of the boxes).
+  const Box3f& root_cell() const { return root_cell_; }
+
+  bool is_leaf(NodeId n) const { return nodes_[n].is_leaf(); }
+  int axis(NodeId n) const { return nodes_[n].axis(); }
+  float split(NodeId n) const { return nodes_[n].split(); }
+  NodeId left(NodeId n) const { return n + 1; }
+  NodeId right(NodeId n) const { return nodes_[n].right_child(); }
+
+  /// A leaf's references: leaf_size boxes, their ids ascending, their boxes side by side.
+  std::uint32_t leaf_size(NodeId n) const { return nodes_[n].count(); }
+  const std::uint32_t* leaf_ids(NodeId n) const { return ids_ + nodes_[n].first(); }
+  const Box3f* leaf_boxes(NodeId n) const { return boxes_ + nodes_[n].first(); }
+
+  /// Orders the leaves left to right: of two leaves, the one in the left subtree of their lowest
+  /// common ancestor has the smaller rank. Nodes are stored depth first, left subtree first, so the
+  /// node index is such a rank.
+  NodeId leaf_rank(NodeId n) const { return n; }
+
+ private:
+  const BoxNode* nodes_;
+  const std::uint32_t* ids_;
+  const Box3f* boxes_;
+  Box3f root_cell_;
+  bool empty_;
+};
+
+/// The cells of the children of a node with plane `split` on `axis`; the closed cells share the plane.
+inline Box3f lower_cell(Box3f cell, int axis, float split) {
+  cell.hi[axis] = split;
+  return cell;
+}
+inline Box3f upper_cell(Box3f cell, int axis, float split) {
+  cell.lo[axis] = split;
+  return cell;
+}
+
+/// The point where a pair is reported: the lower corner of the intersection of two overlapping boxes,
+/// a point of both (closed) boxes, made of their coordinates without rounding.
+inline std::array<float, 3> pair_point(const Box3f& a, const Box3f& b) {
+  return {a.lo[0] < b.lo[0] ? b.lo[0] : a.lo[0], a.lo[1] < b.lo[1] ? b.lo[1] : a.lo[1],
+          a.lo[2] < b.lo[2] ? b.lo[2] : a.lo[2]};
+}
+
+/// Whether the node of `cell` owns the point c of box b: of all the leaves that reference b, exactly
+/// one owns c, and every node on its path from the root does.
+///
+/// Why: the builds send a box to the lower child of a split at p when its lower face is below p, to
+/// the upper child when its upper face is above p (both when it straddles p), and a box lying flat in
+/// the plane to one side. Follow c down from the root: where b goes to one child only, take that
+/// child (c lies in b, hence in that child's closed cell); where b goes to both, take the lower child
+/// when c < p and the upper one when c >= p. That path ends in one leaf, and it is the one leaf whose
+/// cell passes this test: c lies in the closed cell, except on an upper face that b crosses (there
+/// the path went up, to the neighbouring cell). Every comparison is exact (floats compared as they
+/// are).
+///
+/// So a pair of boxes (a, b) with pair point c is reported by the traversal that meets a in the leaf
+/// that owns (a, c) and b in the leaf that owns (b, c), and by no other: each pair once, with no
+/// search for duplicates afterwards. Both leaves' closed cells contain c, so a traversal that visits
+/// every leaf whose closed cell meets a query box meets them.
+inline bool owns(const Box3f& cell, const Box3f& b, const std::array<float, 3>& c) {
+  for (int a = 0; a < 3; ++a) {
+    if (c[a] < cell.lo[a] || c[a] > cell.hi[a]) return false;
+    if (c[a] == cell.hi[a] && b.hi[a] > cell.hi[a]) return false;
+  }
+  return true;
+}
+
+}  // namespace kdspace::detail
