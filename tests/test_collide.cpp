@@ -60,6 +60,11 @@ std::vector<BuildChoice> all_builds() {
   p.method = BoxBuildMethod::median;
   p.max_depth = 20;
   builds.push_back({"median leaf 1", p});
+  p = {};
+  p.method = BoxBuildMethod::binned;
+  builds.push_back({"binned", p});
+  p.leaf_size = 1;
+  builds.push_back({"binned leaf 1", p});
   return builds;
 }
 

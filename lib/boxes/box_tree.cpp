@@ -40,7 +40,8 @@ void check_params(const BoxBuildParams& p) {
   if (p.max_depth > max_box_tree_depth)
     throw Error("max_depth must be at most " + std::to_string(max_box_tree_depth) + ", got " +
                 std::to_string(p.max_depth));
-  if (p.method == BoxBuildMethod::median && p.leaf_size == 0) throw Error("leaf_size must be at least 1");
+  if (p.method != BoxBuildMethod::sah && p.method != BoxBuildMethod::sah_nlogn && p.leaf_size == 0)
+    throw Error("leaf_size must be at least 1");
   if (!(p.max_references_per_box >= 1) || std::isinf(p.max_references_per_box))
     throw Error("max_references_per_box must be a finite number >= 1, got " +
                 number(p.max_references_per_box));
@@ -119,6 +120,9 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
         break;
       case BoxBuildMethod::sah_nlogn:
         detail::build_sah_nlogn(boxes_, bounds_, params, max_depth, out);
+        break;
+      case BoxBuildMethod::binned:
+        detail::build_binned(boxes_, bounds_, params, max_depth, out);
         break;
     }
   }

@@ -240,7 +240,7 @@ inline unsigned build_threads(const BoxBuildParams& params) {
   return params.threads == 0 ? std::max(1u, std::thread::hardware_concurrency()) : params.threads;
 }
 
-// ---- the three methods (build_median.cpp, build_sah.cpp, build_sah_nlogn.cpp) --------------------
+// ---- the methods (build_median.cpp, build_sah.cpp, build_sah_nlogn.cpp, build_binned.cpp) ---------
 
 /// Each builds the tree of `boxes` (already validated, bounds = their union) into `out`.
 void build_median(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBuildParams& params,
@@ -249,5 +249,7 @@ void build_sah(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBu
                std::size_t max_depth, TreeWriter& out);
 void build_sah_nlogn(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBuildParams& params,
                      std::size_t max_depth, TreeWriter& out);
+void build_binned(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBuildParams& params,
+                  std::size_t max_depth, TreeWriter& out);
 
 }  // namespace kdspace::detail

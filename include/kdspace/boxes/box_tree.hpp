@@ -8,6 +8,11 @@
 //   sah_nlogn  the same heuristic with the events sorted once and kept sorted while splitting
 //              (Wald & Havran 2006, "On building fast kd-trees for ray tracing, and on doing that in
 //              O(N log N)"): O(N log N). Builds exactly the tree `sah` builds.
+//   binned     for scenes rebuilt every frame (moving boxes, collisions): planes chosen over the
+//              boxes' centres in place (faces counted in 32 bins, the plane that balances the children
+//              and cuts few boxes), then each box sent down to the leaves it overlaps; no sorting, no
+//              copying of boxes from node to node (lib/boxes/build_binned.cpp). Stops at leaf_size
+//              centres or max_depth.
 // Both SAH builds use "perfect splits" (a box straddling the cell is clipped to it before its faces
 // become candidate planes) and planar events (a flat box lying in the plane goes to the cheaper side).
 //
@@ -33,7 +38,7 @@
 
 namespace kdspace {
 
-enum class BoxBuildMethod { median, sah, sah_nlogn };
+enum class BoxBuildMethod { median, sah, sah_nlogn, binned };
 
 /// Where the median build puts its plane along the cycled axis.
 enum class MedianPosition {
@@ -75,8 +80,8 @@ struct BoxBuildParams {
   /// default: it pays in sparse scenes, and costs little in dense ones.
   float empty_bonus = 0.1f;
 
-  /// S_minObj for the median build: a node with at most this many boxes becomes a leaf. The SAH
-  /// builds stop by cost instead and ignore it.
+  /// S_minObj for the median and binned builds: a node with at most this many boxes becomes a leaf.
+  /// The SAH builds stop by cost instead and ignore it.
   std::size_t leaf_size = 4;
   /// S_maxProf: nodes at this depth become leaves (the root has depth 0). 0 = automatic:
   /// round(8 + 1.3 log2 N), the rule of pbrt. At most max_box_tree_depth.
