@@ -179,7 +179,8 @@ class BoxTree {
 
   std::size_t size() const { return boxes_.size(); }
   const Box3f& box(std::size_t i) const { return boxes_[i]; }
-  /// The union of all boxes (the root cell); lo > hi on every axis when the tree is empty.
+  /// The root cell: the union of all boxes (after refit(), also of the cells the planes were made
+  /// in); lo > hi on every axis when the tree is empty.
   const Box3f& bounds() const { return bounds_; }
   const BoxBuildParams& params() const { return params_; }
   const BoxTreeStats& stats() const { return stats_; }
@@ -201,6 +202,19 @@ class BoxTree {
     return boxes_.capacity() * sizeof(Box3f) + nodes_.capacity() * sizeof(BoxNode) +
            references_.capacity() * sizeof(std::uint32_t) + blocks_.capacity() * sizeof(LeafBlock);
   }
+
+  // ---- moving boxes (lib/boxes/refit.cpp) ---------------------------------------------------------
+
+  /// Refit: the boxes move (or are replaced by n others); the split planes stay, and every box is
+  /// sent again to the leaves it now overlaps (one descent a box, no planes chosen, no sorting).
+  /// Queries then answer for the new boxes exactly, but the tree fits them less well as they drift
+  /// from where the planes were chosen (kdspace/collide/moving_scene.hpp decides when to rebuild).
+  /// Returns false, leaving the tree as it was, when the leaves would hold more than
+  /// max_references_per_box references a box; throws Error for a bad box, as the constructor does.
+  bool refit(const Box3f* boxes, std::size_t n);
+  /// The same when only the boxes moved[0 .. m) have changed (ids strictly ascending, below size()):
+  /// boxes[0 .. size()) are all the boxes, and only the moved ones are read and sent down again.
+  bool refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t m);
 
   // ---- single rays (const, thread-safe) ----------------------------------------------------------
 
@@ -263,6 +277,7 @@ class BoxTree {
   template <bool AnyHit>
   void trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const;
   void compute_stats();
+  void after_refit(double seconds);
 
   std::vector<Box3f> boxes_;
   Box3f bounds_;
