@@ -19,3 +19,13 @@ printf '\000x,y\n1,2\n3,4\n\n' >"$out/corpus-read-part/csv"
 printf '\006\002\000\000\000\000\000\200\077\000\000\000\100\002\000\000\000\000\000\100\100\000\000\200\100' \
   >"$out/corpus-read-part/fvecs"
 "$out/fuzz_read_part" -max_total_time="$seconds" -max_len=4096 -artifact_prefix="$out/" "$out/corpus-read-part"
+
+# fuzz_read_pairs: io::read_pairs (the .pairs reader: lib/io/pairs.cpp, lib/io/record_file.cpp).
+mkdir -p "$out/corpus-read-pairs"
+"$cxx" "${flags[@]}" "$root/fuzz/fuzz_read_pairs.cpp" "$root/lib/io/pairs.cpp" "$root/lib/io/record_file.cpp" \
+  -o "$out/fuzz_read_pairs"
+# Seeds: no pairs; two pairs in order.
+printf '\000\000\000\000\000\000\000\000' >"$out/corpus-read-pairs/empty"
+printf '\002\000\000\000\000\000\000\000\000\000\000\000\001\000\000\000\001\000\000\000\002\000\000\000' \
+  >"$out/corpus-read-pairs/two"
+"$out/fuzz_read_pairs" -max_total_time="$seconds" -max_len=4096 -artifact_prefix="$out/" "$out/corpus-read-pairs"

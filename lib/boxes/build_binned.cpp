@@ -127,10 +127,13 @@ class PlaneBuilder {
       if (!inside_cell(cell, axis, plane)) return false;
       return partition(first, last, axis, plane, middle, lower_centres, upper_centres);
     }
-    const double scale = bin_count / (hi - lo);
+    const auto scale = static_cast<float>(bin_count / (hi - lo));
+    const auto low = static_cast<float>(lo);
     std::array<std::uint32_t, bin_count> centre_bins{}, starts{}, ends{};
     const int ax = axis;
-    auto bin_of = [&](float x) { return std::clamp(static_cast<int>((x - lo) * scale), 0, bin_count - 1); };
+    auto bin_of = [low, scale](float x) {
+      return std::clamp(static_cast<int>((x - low) * scale), 0, bin_count - 1);
+    };
     for (const Item* it = first; it < last; ++it) {
       ++centre_bins[bin_of(it->centre[ax])];
       ++starts[bin_of(it->centre[ax] - it->half[ax])];
