@@ -21,7 +21,7 @@
 //
 // Moving scenes, in the manner of the Broadmark benchmark (Serpa & Rodrigues 2019): --moving-sizes
 // boxes of the uniform scene shrunk to half their size (a box touches a few others now and then),
-// moving by Brownian steps or falling under gravity, every box each frame or 10% of them, for
+// moving by Brownian steps or falling under gravity, every box each frame or 10% (1%) of them, for
 // --frames frames. A frame of each contender is timed from the new positions to its pairs:
 //   kdspace             MovingScene, default: refit, rebuilt when degraded, pairs updated for the moved
 //                       boxes when at most a quarter moved
@@ -613,7 +613,8 @@ int main(int argc, char** argv) {
     const MotionChoice motions[] = {{"Brownian, all move", kdspace::MotionKind::brownian, 1.0},
                                     {"free fall, all move", kdspace::MotionKind::free_fall, 1.0},
                                     {"Brownian, 10% move", kdspace::MotionKind::brownian, 0.1},
-                                    {"free fall, 10% move", kdspace::MotionKind::free_fall, 0.1}};
+                                    {"free fall, 10% move", kdspace::MotionKind::free_fall, 0.1},
+                                    {"Brownian, 1% move", kdspace::MotionKind::brownian, 0.01}};
     for (const std::size_t n : o.moving_sizes)
       for (const MotionChoice& motion : motions) agree = run_moving_scene(o, n, motion) && agree;
   }

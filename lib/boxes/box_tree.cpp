@@ -136,15 +136,25 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
   compute_stats();
 }
 
-void BoxTree::compute_stats() {
+void BoxTree::count_leaves() {
   stats_.boxes = boxes_.size();
   stats_.nodes = nodes_.size();
   stats_.references = 0;
   stats_.leaves = stats_.empty_leaves = stats_.max_leaf_size = 0;
-  if (boxes_.empty()) {
-    stats_.leaves = stats_.empty_leaves = 1;
-    return;
-  }
+  for (const BoxNode& node : nodes_)
+    if (node.is_leaf()) {
+      ++stats_.leaves;
+      stats_.references += node.count();
+      stats_.empty_leaves += node.count() == 0 ? 1 : 0;
+      stats_.max_leaf_size = std::max<std::size_t>(stats_.max_leaf_size, node.count());
+    }
+  stats_.references_per_box =
+      boxes_.empty() ? 0 : static_cast<double>(stats_.references) / static_cast<double>(boxes_.size());
+}
+
+void BoxTree::compute_stats() {
+  count_leaves();
+  if (boxes_.empty()) return;
   // Walk the tree with each node's cell to weigh it by P(cell | scene) (the SAH tree cost, W&H 2006).
   const detail::CellMeasure measure(HitProbability::surface_area, bounds_);
   const double whole = measure.whole();
@@ -160,10 +170,6 @@ void BoxTree::compute_stats() {
     const BoxNode& node = nodes_[item.node];
     const double p = whole > 0 ? measure(item.cell) / whole : 1.0;
     if (node.is_leaf()) {
-      ++stats_.leaves;
-      stats_.references += node.count();
-      stats_.empty_leaves += node.count() == 0 ? 1 : 0;
-      stats_.max_leaf_size = std::max<std::size_t>(stats_.max_leaf_size, node.count());
       cost += static_cast<double>(params_.K_i) * detail::box_tests(node.count()) * p;
     } else {
       cost += static_cast<double>(params_.K_t) * p;
@@ -175,7 +181,6 @@ void BoxTree::compute_stats() {
     }
   }
   stats_.sah_cost = cost;
-  stats_.references_per_box = static_cast<double>(stats_.references) / static_cast<double>(boxes_.size());
 }
 
 }  // namespace kdspace

@@ -1,7 +1,9 @@
 // BoxTree::refit: the same split planes, the boxes sent down them again (route.hpp).
 #include <algorithm>
 #include <chrono>
+#include <cstring>
 #include <string>
+#include <vector>
 
 #include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/error.hpp"
@@ -10,6 +12,9 @@
 namespace kdspace {
 
 namespace {
+
+/// References are counted in 30 bits (BoxNode).
+constexpr std::size_t reference_limit = (std::size_t{1} << 30) - 1;
 
 void check_boxes(const Box3f* boxes, std::size_t n) {
   if (n >= (std::size_t{1} << 30)) throw Error("too many boxes: " + std::to_string(n) + " (at most 2^30 - 1)");
@@ -43,10 +48,16 @@ bool BoxTree::refit(const Box3f* boxes, std::size_t n) {
   boxes_.assign(boxes, boxes + n);
   // The root cell keeps the old cells, so that every plane stays strictly inside its cell.
   for (const Box3f& b : boxes_) include(bounds_, b);
-  after_refit(seconds_since(start));
+  leaf_boxes_.resize(references_.size());
+  for (std::size_t r = 0; r < references_.size(); ++r) leaf_boxes_[r] = boxes_[references_[r]];
+  count_leaves();
+  stats_.build_seconds = seconds_since(start);
   return true;
 }
 
+// Only the leaves that a moved box leaves or enters change: the others' references and boxes are
+// copied over in blocks, and only the changed leaves are merged (their unmoved references, in order,
+// with the moved boxes that now reach them).
 bool BoxTree::refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t m) {
   if (m > 0 && (boxes == nullptr || moved == nullptr)) throw Error("refit: null pointer");
   for (std::size_t k = 0; k < m; ++k) {
@@ -58,22 +69,106 @@ bool BoxTree::refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t 
     if (!problem.empty()) throw Error("box " + std::to_string(moved[k] + 1) + ": " + problem);
   }
   const auto start = std::chrono::steady_clock::now();
-  const auto budget = static_cast<std::size_t>(static_cast<double>(params_.max_references_per_box) *
-                                               static_cast<double>(boxes_.size()));
-  if (!detail::route_moved_boxes(nodes_, boxes, boxes_.size(), moved, m, budget, references_)) return false;
+
+  // The leaves the moved boxes leave (from their old boxes) and enter (new boxes), and what enters.
+  std::vector<char> changed(nodes_.size(), 0);
+  std::vector<std::uint32_t> entering_leaf, entering_box, entering_count(nodes_.size(), 0);
+  for (std::size_t k = 0; k < m; ++k) {
+    detail::for_each_leaf_of(nodes_, boxes_[moved[k]], [&](std::uint32_t leaf) { changed[leaf] = 1; });
+    detail::for_each_leaf_of(nodes_, boxes[moved[k]], [&](std::uint32_t leaf) {
+      changed[leaf] = 1;
+      entering_leaf.push_back(leaf);
+      entering_box.push_back(moved[k]);
+      ++entering_count[leaf];
+    });
+  }
+  // What enters, grouped by leaf in ascending box order (a stable counting sort).
+  std::vector<std::uint32_t> entering_first(nodes_.size() + 1, 0);
+  for (std::size_t node = 0; node < nodes_.size(); ++node)
+    entering_first[node + 1] = entering_first[node] + entering_count[node];
+  std::vector<std::uint32_t> entering(entering_box.size());
+  {
+    std::vector<std::uint32_t> next(entering_first.begin(), entering_first.end() - 1);
+    for (std::size_t e = 0; e < entering_box.size(); ++e) entering[next[entering_leaf[e]]++] = entering_box[e];
+  }
+  std::vector<char> moved_flag(boxes_.size(), 0);
+  for (std::size_t k = 0; k < m; ++k) moved_flag[moved[k]] = 1;
+  auto is_moved = [&](std::uint32_t box) { return moved_flag[box] != 0; };
+
+  // The new size of every leaf, and so where each one starts.
+  std::vector<BoxNode> nodes = nodes_;
+  std::size_t total = 0;
+  for (std::size_t node = 0; node < nodes.size(); ++node) {
+    const BoxNode& at = nodes_[node];
+    if (!at.is_leaf()) continue;
+    std::size_t count = at.count();
+    if (changed[node]) {
+      const std::uint32_t* ref = references_.data() + at.first();
+      count = entering_count[node];
+      for (std::uint32_t r = 0; r < at.count(); ++r) count += is_moved(ref[r]) ? 0 : 1;
+    }
+    if (total + count > reference_limit) return false;
+    nodes[node] = BoxNode::leaf(static_cast<std::uint32_t>(total), static_cast<std::uint32_t>(count));
+    total += count;
+  }
+  const double budget = static_cast<double>(params_.max_references_per_box) * static_cast<double>(boxes_.size());
+  if (static_cast<double>(total) > budget) return false;
+
+  // Runs of unchanged leaves are copied as blocks (they are contiguous in both lists); changed leaves
+  // are merged.
+  std::vector<std::uint32_t> references(total);
+  std::vector<Box3f> leaf_boxes(total);
+  std::size_t run_old = 0, run_new = 0, run_length = 0;
+  auto copy_run = [&] {
+    std::copy_n(references_.data() + run_old, run_length, references.data() + run_new);
+    std::copy_n(leaf_boxes_.data() + run_old, run_length, leaf_boxes.data() + run_new);
+    run_length = 0;
+  };
+  for (std::size_t node = 0; node < nodes.size(); ++node) {
+    const BoxNode& at = nodes_[node];
+    if (!at.is_leaf()) continue;
+    if (!changed[node]) {
+      if (run_length == 0) {
+        run_old = at.first();
+        run_new = nodes[node].first();
+      }
+      run_length += at.count();
+      continue;
+    }
+    copy_run();
+    std::size_t out = nodes[node].first();
+    const std::uint32_t *old_ref = references_.data() + at.first(), *old_end = old_ref + at.count();
+    const Box3f* old_box = leaf_boxes_.data() + at.first();
+    const std::uint32_t* new_ref = entering.data() + entering_first[node];
+    const std::uint32_t* new_end = entering.data() + entering_first[node + 1];
+    for (;;) {
+      while (old_ref < old_end && is_moved(*old_ref)) {
+        ++old_ref;
+        ++old_box;
+      }
+      const bool old_left = old_ref < old_end, new_left = new_ref < new_end;
+      if (!old_left && !new_left) break;
+      if (old_left && (!new_left || *old_ref < *new_ref)) {
+        references[out] = *old_ref++;
+        leaf_boxes[out++] = *old_box++;
+      } else {
+        leaf_boxes[out] = boxes[*new_ref];
+        references[out++] = *new_ref++;
+      }
+    }
+  }
+  copy_run();
+
+  nodes_.swap(nodes);
+  references_.swap(references);
+  leaf_boxes_.swap(leaf_boxes);
   for (std::size_t k = 0; k < m; ++k) {
     boxes_[moved[k]] = boxes[moved[k]];
     include(bounds_, boxes[moved[k]]);
   }
-  after_refit(seconds_since(start));
+  count_leaves();
+  stats_.build_seconds = seconds_since(start);
   return true;
-}
-
-void BoxTree::after_refit(double seconds) {
-  leaf_boxes_.resize(references_.size());
-  for (std::size_t r = 0; r < references_.size(); ++r) leaf_boxes_[r] = boxes_[references_[r]];
-  stats_.build_seconds = seconds;
-  compute_stats();
 }
 
 }  // namespace kdspace

@@ -49,9 +49,4 @@ void for_each_leaf_of(const std::vector<BoxNode>& nodes, const Box3f& b, Leaf&& 
 bool route_boxes(std::vector<BoxNode>& nodes, const Box3f* boxes, std::size_t n, std::size_t max_references,
                  std::vector<std::uint32_t>& references);
 
-/// The same when only the boxes moved[0 .. m) (ascending ids, below n) changed: the other boxes keep
-/// their references. `references` holds the leaves' current references on entry.
-bool route_moved_boxes(std::vector<BoxNode>& nodes, const Box3f* boxes, std::size_t n, const std::uint32_t* moved,
-                       std::size_t m, std::size_t max_references, std::vector<std::uint32_t>& references);
-
 }  // namespace kdspace::detail

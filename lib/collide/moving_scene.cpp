@@ -30,10 +30,11 @@ double seconds_since(Clock::time_point start) {
 double leaf_test_cost(const BoxTree& tree) {
   const detail::TreeAccess access(tree);
   double cost = 0;
-  detail::for_each_leaf(access, [&](detail::NodeId leaf, const Box3f&) {
-    const double count = access.leaf_size(leaf);
-    cost += count * count;
-  });
+  for (detail::NodeId node = 0; node < access.node_count(); ++node)
+    if (access.is_leaf(node)) {
+      const double count = access.leaf_size(node);
+      cost += count * count;
+    }
   return cost;
 }
 
@@ -87,7 +88,11 @@ const std::vector<IndexPair>& MovingScene::step(const Box3f* boxes, std::size_t 
       stats.rebuilt = true;
     }
   }
-  previous_.assign(boxes, boxes + n);
+  if (same_count) {
+    for (const std::uint32_t i : moved_) previous_[i] = boxes[i];
+  } else {
+    previous_.assign(boxes, boxes + n);
+  }
   stats.update_s = seconds_since(update_start);
 
   const auto pairs_start = Clock::now();

@@ -23,6 +23,7 @@ class TreeAccess {
         ids_(tree.references().data()),
         boxes_(tree.reference_boxes().data()),
         root_cell_(tree.bounds()),
+        node_count_(static_cast<NodeId>(tree.node_count())),
         empty_(tree.size() == 0) {}
 
   /// A tree of no boxes: every query finds nothing (its root cell is empty, lo > hi).
@@ -31,6 +32,8 @@ class TreeAccess {
   /// The cell of the root: it holds every box (the union of the boxes).
   const Box3f& root_cell() const { return root_cell_; }
 
+  /// Nodes are numbered 0 .. node_count() - 1.
+  NodeId node_count() const { return node_count_; }
   bool is_leaf(NodeId n) const { return nodes_[n].is_leaf(); }
   int axis(NodeId n) const { return nodes_[n].axis(); }
   float split(NodeId n) const { return nodes_[n].split(); }
@@ -52,6 +55,7 @@ class TreeAccess {
   const std::uint32_t* ids_;
   const Box3f* boxes_;
   Box3f root_cell_;
+  NodeId node_count_;
   bool empty_;
 };
 

@@ -164,7 +164,9 @@ struct BoxTreeStats {
   /// Expected cost of a ray through the scene bounds, the SAH cost of the tree (W&H 2006):
   /// sum over inner nodes of K_t * P(node) + sum over leaves of K_i * ceil(|boxes| / 4) * P(leaf),
   /// P(cell) = SA(cell) / SA(scene bounds). Always by surface area, whatever `probability` the
-  /// build used, so that trees built either way can be compared.
+  /// build used, so that trees built either way can be compared. That of the tree as built: a
+  /// refit() updates the other figures (a walk over the cells would cost it more than it saves).
+  /// build_seconds after a refit: the refit's.
   double sah_cost = 0;
   double build_seconds = 0;
 };
@@ -277,7 +279,7 @@ class BoxTree {
   template <bool AnyHit>
   void trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const;
   void compute_stats();
-  void after_refit(double seconds);
+  void count_leaves();
 
   std::vector<Box3f> boxes_;
   Box3f bounds_;
