@@ -15,7 +15,8 @@
 //                       inserting a box sorts it into three lists, which costs O(n) a box in random
 //                       order, so it runs up to --sap-max boxes
 // Scenes: generate_boxes (uniform, clustered) of --sizes boxes, and the boxes of the triangles of
-// real meshes (--meshes DIR: CGAL's example meshes, Debian's libcgal-demo). Every scene is scaled so
+// the real meshes that bench/real_data/fetch.sh DIR unpacks from Debian packages (--meshes DIR:
+// CGAL's example meshes, assimp's Wuson; the point scans there are left out). Every scene is scaled so
 // that its mean box extent is 1: Bullet's constants (DBVT's margin of 0.05) assume objects of about
 // a metre.
 //
@@ -46,11 +47,11 @@
 //                              [--sah-max N] [--rebuild-max N] [--static-only | --moving-only] [--quick]
 //   --quick: sizes 10000,100000, moving sizes 10000, 30 frames, 1 repetition.
 // Output: markdown tables, then one JSON line per measurement ({"bench":"collide",...}).
+#include <BulletCollision/BroadphaseCollision/btAxisSweep3.h>
+#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <CGAL/box_intersection_d.h>
 #include <btBulletCollisionCommon.h>
 
-#include <BulletCollision/BroadphaseCollision/btAxisSweep3.h>
-#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -68,7 +69,7 @@
 #include "kdspace/collide/moving_scene.hpp"
 #include "kdspace/collide/overlap.hpp"
 #include "kdspace/rays/scene_gen.hpp"
-#include "mesh_boxes.hpp"
+#include "real_data/mesh_io.hpp"
 
 namespace {
 
@@ -93,8 +94,7 @@ double median(std::vector<double> v) {
 struct Options {
   std::vector<std::size_t> sizes{10000, 100000, 1000000};
   std::vector<kdspace::SceneKind> kinds{kdspace::SceneKind::uniform, kdspace::SceneKind::clustered};
-  std::string meshes;  ///< folder of .off meshes
-  std::vector<std::string> mesh_names{"bunny00", "armadillo", "refined_elephant"};
+  std::string meshes;  ///< the folder bench/real_data/fetch.sh filled
   std::vector<std::size_t> moving_sizes{10000, 100000};
   int frames = 100;
   int reps = 3;
@@ -106,11 +106,12 @@ struct Options {
 
 [[noreturn]] void usage(const std::string& problem) {
   if (!problem.empty()) std::fprintf(stderr, "kdspace-collide-bench: %s\n", problem.c_str());
-  std::fprintf(stderr,
-               "usage: kdspace-collide-bench [--sizes N,...] [--kinds uniform,clustered] [--meshes DIR]\n"
-               "                             [--moving-sizes N,...] [--frames F] [--reps R] [--sap-max N]\n"
-               "                             [--sah-max N] [--rebuild-max N] [--static-only | --moving-only]\n"
-               "                             [--quick]\n");
+  std::fprintf(
+      stderr,
+      "usage: kdspace-collide-bench [--sizes N,...] [--kinds uniform,clustered] [--meshes DIR]\n"
+      "                             [--moving-sizes N,...] [--frames F] [--reps R] [--sap-max N]\n"
+      "                             [--sah-max N] [--rebuild-max N] [--static-only | --moving-only]\n"
+      "                             [--quick]\n");
   std::exit(2);
 }
 
@@ -149,9 +150,12 @@ Options parse(int argc, char** argv) {
     } else if (a == "--kinds") {
       o.kinds.clear();
       for (const std::string& s : split_list(next())) {
-        if (s == "uniform") o.kinds.push_back(kdspace::SceneKind::uniform);
-        else if (s == "clustered") o.kinds.push_back(kdspace::SceneKind::clustered);
-        else usage("unknown scene kind: " + s);
+        if (s == "uniform")
+          o.kinds.push_back(kdspace::SceneKind::uniform);
+        else if (s == "clustered")
+          o.kinds.push_back(kdspace::SceneKind::clustered);
+        else
+          usage("unknown scene kind: " + s);
       }
     } else if (a == "--meshes") {
       o.meshes = next();
@@ -231,8 +235,10 @@ Pairs bullet_pairs(btBroadphaseInterface& broadphase, const std::vector<Box3f>& 
   Pairs pairs;
   pairs.reserve(static_cast<std::size_t>(array.size()));
   for (int i = 0; i < array.size(); ++i) {
-    const auto a = static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy0->m_clientObject));
-    const auto b = static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy1->m_clientObject));
+    const auto a =
+        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy0->m_clientObject));
+    const auto b =
+        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy1->m_clientObject));
     if (exact && !boxes[a].overlaps(boxes[b])) continue;
     pairs.push_back({std::min(a, b), std::max(a, b)});
   }
@@ -277,8 +283,8 @@ Pairs run_kdspace(const std::vector<Box3f>& boxes, kdspace::BoxBuildMethod metho
   return pairs;
 }
 
-using CgalBox = CGAL::Box_intersection_d::Box_with_info_d<float, 3, std::uint32_t,
-                                                          CGAL::Box_intersection_d::ID_EXPLICIT>;
+using CgalBox =
+    CGAL::Box_intersection_d::Box_with_info_d<float, 3, std::uint32_t, CGAL::Box_intersection_d::ID_EXPLICIT>;
 
 Pairs run_cgal(const std::vector<Box3f>& boxes, double& build_s, double& total_s) {
   const auto start = Clock::now();
@@ -313,8 +319,10 @@ Pairs run_dbvt(const std::vector<Box3f>& boxes, double& build_s, double& total_s
   Pairs pairs;
   pairs.reserve(static_cast<std::size_t>(array.size()));
   for (int i = 0; i < array.size(); ++i) {
-    const auto a = static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy0->m_clientObject));
-    const auto b = static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy1->m_clientObject));
+    const auto a =
+        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy0->m_clientObject));
+    const auto b =
+        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy1->m_clientObject));
     pairs.push_back({std::min(a, b), std::max(a, b)});
   }
   total_s = seconds_since(start);
@@ -333,8 +341,10 @@ Pairs run_sap(const std::vector<Box3f>& boxes, double& build_s, double& total_s)
   Pairs pairs;
   pairs.reserve(static_cast<std::size_t>(array.size()));
   for (int i = 0; i < array.size(); ++i) {
-    const auto a = static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy0->m_clientObject));
-    const auto b = static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy1->m_clientObject));
+    const auto a =
+        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy0->m_clientObject));
+    const auto b =
+        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy1->m_clientObject));
     if (boxes[a].overlaps(boxes[b])) pairs.push_back({std::min(a, b), std::max(a, b)});
   }
   total_s = seconds_since(start);
@@ -377,32 +387,34 @@ bool run_static_scene(const Options& o, const std::string& scene, std::vector<Bo
   bool agree = true;
   for (std::size_t c = 1; c < contenders.size(); ++c)
     if (!total[c].empty() && answers[c] != answers[0]) {
-      std::fprintf(stderr, "collide-bench: %s: %s found %zu pairs, kdspace binned %zu: DISAGREE\n", scene.c_str(),
-                   contenders[c].name.c_str(), answers[c].size(), answers[0].size());
+      std::fprintf(stderr, "collide-bench: %s: %s found %zu pairs, kdspace binned %zu: DISAGREE\n",
+                   scene.c_str(), contenders[c].name.c_str(), answers[c].size(), answers[0].size());
       agree = false;
     }
 
   const double ours = median(total[0]);
   double best_bullet = 0;
   for (const std::size_t c : {3, 4})
-    if (!total[c].empty()) best_bullet = best_bullet == 0 ? median(total[c]) : std::min(best_bullet, median(total[c]));
+    if (!total[c].empty())
+      best_bullet = best_bullet == 0 ? median(total[c]) : std::min(best_bullet, median(total[c]));
   auto cell = [&](std::size_t c) {
     char buf[64];
     if (total[c].empty()) return std::string("—");
     std::snprintf(buf, sizeof buf, "%.4f", median(total[c]));
     return std::string(buf);
   };
-  std::printf("| %s | %zu | %zu | %.4f + %.4f = %s | %s | %s | %s | %s | %.2f | %.2f |%s\n", scene.c_str(), boxes.size(),
-              answers[0].size(), median(build[0]), ours - median(build[0]), cell(0).c_str(), cell(1).c_str(),
-              cell(2).c_str(), cell(3).c_str(), cell(4).c_str(), median(total[2]) / ours,
+  std::printf("| %s | %zu | %zu | %.4f + %.4f = %s | %s | %s | %s | %s | %.2f | %.2f |%s\n", scene.c_str(),
+              boxes.size(), answers[0].size(), median(build[0]), ours - median(build[0]), cell(0).c_str(),
+              cell(1).c_str(), cell(2).c_str(), cell(3).c_str(), cell(4).c_str(), median(total[2]) / ours,
               best_bullet / ours, agree ? "" : " DISAGREE");
   for (std::size_t c = 0; c < contenders.size(); ++c)
     if (!total[c].empty())
-      std::fprintf(stdout,
-                   "{\"bench\":\"collide\",\"part\":\"static\",\"scene\":\"%s\",\"boxes\":%zu,\"contender\":\"%s\","
-                   "\"build_s\":%.6f,\"total_s\":%.6f,\"pairs\":%zu,\"reps\":%zu}\n",
-                   scene.c_str(), boxes.size(), contenders[c].name.c_str(), median(build[c]), median(total[c]),
-                   answers[c].size(), total[c].size());
+      std::fprintf(
+          stdout,
+          "{\"bench\":\"collide\",\"part\":\"static\",\"scene\":\"%s\",\"boxes\":%zu,\"contender\":\"%s\","
+          "\"build_s\":%.6f,\"total_s\":%.6f,\"pairs\":%zu,\"reps\":%zu}\n",
+          scene.c_str(), boxes.size(), contenders[c].name.c_str(), median(build[c]), median(total[c]),
+          answers[c].size(), total[c].size());
   std::fflush(stdout);
   return agree;
 }
@@ -424,10 +436,13 @@ class MovingContender {
 
 class KdspaceMoving : public MovingContender {
  public:
-  KdspaceMoving(std::string name, kdspace::MovingSceneParams params) : name_(std::move(name)), scene_(params) {}
+  KdspaceMoving(std::string name, kdspace::MovingSceneParams params)
+      : name_(std::move(name)), scene_(params) {}
   std::string name() const override { return name_; }
   void start(const std::vector<Box3f>& boxes) override { scene_.step(boxes); }
-  void frame(const std::vector<Box3f>& boxes, const std::vector<std::uint32_t>&) override { scene_.step(boxes); }
+  void frame(const std::vector<Box3f>& boxes, const std::vector<std::uint32_t>&) override {
+    scene_.step(boxes);
+  }
   Pairs pairs(const std::vector<Box3f>&) override { return scene_.pairs(); }
   std::size_t rebuilds = 0;
 
@@ -448,11 +463,13 @@ class BulletMoving : public MovingContender {
     }
     proxies_.resize(boxes.size());
     for (std::size_t i = 0; i < boxes.size(); ++i)
-      proxies_[i] = broadphase_->createProxy(lo_of(boxes[i]), hi_of(boxes[i]), 0, client_of(i), 1, -1, nullptr);
+      proxies_[i] =
+          broadphase_->createProxy(lo_of(boxes[i]), hi_of(boxes[i]), 0, client_of(i), 1, -1, nullptr);
     broadphase_->calculateOverlappingPairs(nullptr);
   }
   void frame(const std::vector<Box3f>& boxes, const std::vector<std::uint32_t>& moved) override {
-    for (const std::uint32_t i : moved) broadphase_->setAabb(proxies_[i], lo_of(boxes[i]), hi_of(boxes[i]), nullptr);
+    for (const std::uint32_t i : moved)
+      broadphase_->setAabb(proxies_[i], lo_of(boxes[i]), hi_of(boxes[i]), nullptr);
     broadphase_->calculateOverlappingPairs(nullptr);
   }
   Pairs pairs(const std::vector<Box3f>& boxes) override { return bullet_pairs(*broadphase_, boxes, true); }
@@ -521,16 +538,16 @@ bool run_moving_scene(const Options& o, std::size_t n, const MotionChoice& motio
     pairs_sum += reference.size();
     if (frame == 1 || frame + 1 == o.frames) {
       if (reference != kdspace::brute_force_pairs(boxes)) {
-        std::fprintf(stderr, "collide-bench: moving %s: kdspace differs from brute force at frame %d\n", motion.name,
-                     frame);
+        std::fprintf(stderr, "collide-bench: moving %s: kdspace differs from brute force at frame %d\n",
+                     motion.name, frame);
         agree = false;
       }
     }
     if (frame % 10 == 0 || frame + 1 == o.frames)
       for (std::size_t c = 1; c < contenders.size(); ++c)
         if (contenders[c]->pairs(boxes) != reference) {
-          std::fprintf(stderr, "collide-bench: moving %s: %s disagrees with kdspace at frame %d\n", motion.name,
-                       contenders[c]->name().c_str(), frame);
+          std::fprintf(stderr, "collide-bench: moving %s: %s disagrees with kdspace at frame %d\n",
+                       motion.name, contenders[c]->name().c_str(), frame);
           agree = false;
         }
   }
@@ -540,8 +557,13 @@ bool run_moving_scene(const Options& o, std::size_t n, const MotionChoice& motio
     return 1000 * sum / static_cast<double>(seconds[c].size());
   };
   std::printf("| %s | %zu | %.0f |", motion.name, n, static_cast<double>(pairs_sum) / (o.frames - 1));
-  const std::vector<std::string> columns{"kdspace", "kdspace refit", "kdspace rebuild binned", "kdspace rebuild median",
-                                         "kdspace rebuild sah-nlogn", "Bullet DBVT", "Bullet SAP"};
+  const std::vector<std::string> columns{"kdspace",
+                                         "kdspace refit",
+                                         "kdspace rebuild binned",
+                                         "kdspace rebuild median",
+                                         "kdspace rebuild sah-nlogn",
+                                         "Bullet DBVT",
+                                         "Bullet SAP"};
   double dbvt = 0, ours = mean_ms(0);
   for (const std::string& column : columns) {
     std::size_t c = 0;
@@ -569,16 +591,20 @@ bool run_moving_scene(const Options& o, std::size_t n, const MotionChoice& motio
 int main(int argc, char** argv) {
   const Options o = parse(argc, argv);
   bool agree = true;
-  std::printf("# kdspace-collide-bench: all overlapping pairs, kdspace BoxTree vs CGAL box_intersection_d and "
-              "Bullet %d broad phases, 1 thread\n\n",
-              btGetVersion());
+  std::printf(
+      "# kdspace-collide-bench: all overlapping pairs, kdspace BoxTree vs CGAL box_intersection_d and "
+      "Bullet %d broad phases, 1 thread\n\n",
+      btGetVersion());
   if (o.static_part) {
     std::printf(
         "## Static scenes: seconds from the boxes to the list of pairs (median of %d interleaved runs)\n\n"
-        "Scenes scaled to a mean box extent of 1. kdspace binned: build + pairs = total. Ratios: CGAL ÷ kdspace "
-        "binned and the faster Bullet broad phase ÷ kdspace binned (above 1: kdspace is faster). SAP runs up to "
+        "Scenes scaled to a mean box extent of 1. kdspace binned: build + pairs = total. Ratios: CGAL ÷ "
+        "kdspace "
+        "binned and the faster Bullet broad phase ÷ kdspace binned (above 1: kdspace is faster). SAP runs up "
+        "to "
         "%zu boxes (it inserts a box in O(n)), sah-nlogn up to %zu.\n\n"
-        "| scene | boxes | pairs | kdspace binned s | kdspace sah-nlogn s | CGAL s | Bullet DBVT s | Bullet SAP s | "
+        "| scene | boxes | pairs | kdspace binned s | kdspace sah-nlogn s | CGAL s | Bullet DBVT s | Bullet "
+        "SAP s | "
         "CGAL ÷ kdspace | Bullet ÷ kdspace |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         o.reps, o.sap_max, o.sah_max);
     for (const std::size_t n : o.sizes)
@@ -587,26 +613,35 @@ int main(int argc, char** argv) {
                                  kdspace::generate_boxes(n, kind, 1)) &&
                 agree;
     if (!o.meshes.empty())
-      for (const std::string& mesh : o.mesh_names) {
+      for (const kdspace::bench::Mesh& mesh : kdspace::bench::read_real_meshes(o.meshes)) {
+        if (mesh.triangles.empty()) continue;  // a scan: points only
         std::vector<Box3f> boxes;
-        try {
-          boxes = bench::read_off_face_boxes(o.meshes + "/" + mesh + ".off");
-        } catch (const std::exception& e) {
-          std::fprintf(stderr, "collide-bench: skipping mesh %s: %s\n", mesh.c_str(), e.what());
-          continue;
+        boxes.reserve(mesh.triangles.size());
+        for (const auto& triangle : mesh.triangles) {
+          Box3f b;
+          b.lo = b.hi = mesh.vertices[triangle[0]];
+          for (const std::uint32_t v : triangle)
+            for (int a = 0; a < 3; ++a) {
+              b.lo[a] = std::min(b.lo[a], mesh.vertices[v][a]);
+              b.hi[a] = std::max(b.hi[a], mesh.vertices[v][a]);
+            }
+          boxes.push_back(b);
         }
-        agree = run_static_scene(o, mesh + " triangles", std::move(boxes)) && agree;
+        agree = run_static_scene(o, mesh.name + " triangles", std::move(boxes)) && agree;
       }
   }
   if (o.moving_part) {
     std::printf(
         "\n## Moving scenes: mean milliseconds a frame (frames 2 to %d)\n\n"
         "The uniform scene with boxes shrunk to half their size, scaled to a mean box extent of 1. kdspace: "
-        "MovingScene defaults (refit; pairs updated for the moved boxes when at most a quarter moved); refit: "
-        "all pairs found every frame; rebuild: a new tree every frame. Bullet: setAabb for the moved boxes and "
+        "MovingScene defaults (refit; pairs updated for the moved boxes when at most a quarter moved); "
+        "refit: "
+        "all pairs found every frame; rebuild: a new tree every frame. Bullet: setAabb for the moved boxes "
+        "and "
         "calculateOverlappingPairs (reading its pair cache out is not timed). Last column: Bullet DBVT ÷ "
         "kdspace (above 1: kdspace is faster).\n\n"
-        "| motion | boxes | pairs a frame | kdspace | kdspace refit | kdspace rebuild binned | kdspace rebuild "
+        "| motion | boxes | pairs a frame | kdspace | kdspace refit | kdspace rebuild binned | kdspace "
+        "rebuild "
         "median | kdspace rebuild sah-nlogn | Bullet DBVT | Bullet SAP | DBVT ÷ kdspace |\n"
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         o.frames);

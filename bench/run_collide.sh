@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Runs the collision benchmark (kdspace-collide-bench) on generated scenes and on the triangles of
-# CGAL's example meshes, which Debian ships in the libcgal-demo package: the package is downloaded
-# (apt-get download, no installation) and three meshes unpacked into the build folder, once.
+# the real meshes that bench/real_data/fetch.sh downloads (apt-get download, no installation) and
+# unpacks into the build folder, once.
 #
 # usage: bench/run_collide.sh [kdspace-collide-bench options, e.g. --quick]
-# environment: BUILD_DIR (default build/bench), RESULTS_DIR (default bench/results), MESHES_DIR
-#              (default BUILD_DIR/meshes)
+# environment: BUILD_DIR (default build/bench), RESULTS_DIR (default bench/results), REAL_DATA_DIR
+#              (default BUILD_DIR/real_data)
 # Build first: cmake --preset bench && cmake --build build/bench -j2 --target kdspace-collide-bench
 # Writes RESULTS_DIR/collide.log (stdout whole), collide.jsonl (its JSON lines) and collide.md (the
 # tables). Exits with the bench's status (1: the libraries disagreed on a pair set).
@@ -15,7 +15,7 @@ here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/.." && pwd)
 build=${BUILD_DIR:-$root/build/bench}
 results=${RESULTS_DIR:-$root/bench/results}
-meshes=${MESHES_DIR:-$build/meshes}
+real_data=${REAL_DATA_DIR:-$build/real_data}
 bench=$build/bench/kdspace-collide-bench
 if [ ! -x "$bench" ]; then
   echo "run_collide.sh: $bench not built; run: cmake --preset bench && cmake --build build/bench -j2 --target kdspace-collide-bench" >&2
@@ -23,21 +23,11 @@ if [ ! -x "$bench" ]; then
 fi
 mkdir -p "$results"
 
-if [ ! -f "$meshes/bunny00.off" ]; then
-  unpack=$(mktemp -d)
-  if (cd "$unpack" && apt-get download libcgal-demo >/dev/null 2>&1) && dpkg -x "$unpack"/libcgal-demo_*.deb "$unpack/x" &&
-    tar xzf "$unpack"/x/usr/share/doc/libcgal-dev/data.tar.gz -C "$unpack" data/meshes/bunny00.off \
-      data/meshes/armadillo.off data/meshes/refined_elephant.off; then
-    mkdir -p "$meshes"
-    cp "$unpack"/data/meshes/*.off "$meshes"/
-  fi
-  rm -rf "$unpack"
-fi
 args=()
-if [ -f "$meshes/bunny00.off" ]; then
-  args=(--meshes "$meshes")
+if [ -f "$real_data/real_data.txt" ] || "$here/real_data/fetch.sh" "$real_data"; then
+  args=(--meshes "$real_data")
 else
-  echo "run_collide.sh: no meshes in $meshes (apt-get download libcgal-demo failed); the bench skips them" >&2
+  echo "run_collide.sh: bench/real_data/fetch.sh failed; the bench skips the real meshes" >&2
 fi
 
 echo "run_collide.sh: $bench ${args[*]} $*" >&2

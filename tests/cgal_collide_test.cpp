@@ -29,8 +29,8 @@ namespace {
 
 // ID_EXPLICIT: every box gets its own id when made, which box_self_intersection_d needs (it works on
 // a copy of the boxes); info() carries our index.
-using CgalBox = CGAL::Box_intersection_d::Box_with_info_d<float, 3, std::uint32_t,
-                                                          CGAL::Box_intersection_d::ID_EXPLICIT>;
+using CgalBox =
+    CGAL::Box_intersection_d::Box_with_info_d<float, 3, std::uint32_t, CGAL::Box_intersection_d::ID_EXPLICIT>;
 
 std::vector<CgalBox> to_cgal(const std::vector<Box3f>& boxes) {
   std::vector<CgalBox> out;
@@ -63,8 +63,10 @@ std::vector<IndexPair> cgal_pairs(const std::vector<Box3f>& first, const std::ve
   std::vector<IndexPair> pairs;
   CGAL::box_intersection_d(
       a.begin(), a.end(), b.begin(), b.end(),
-      [&](const CgalBox& x, const CgalBox& y) { pairs.push_back({x.info(), y.info()}); }, std::ptrdiff_t(10),
-      CGAL::Box_intersection_d::CLOSED, CGAL::Box_intersection_d::BIPARTITE);
+      [&](const CgalBox& x, const CgalBox& y) {
+        pairs.push_back({x.info(), y.info()});
+      },
+      std::ptrdiff_t(10), CGAL::Box_intersection_d::CLOSED, CGAL::Box_intersection_d::BIPARTITE);
   std::sort(pairs.begin(), pairs.end());
   return pairs;
 }
@@ -82,10 +84,12 @@ std::vector<BoxBuildParams> builds() {
 std::string first_difference(const std::vector<IndexPair>& got, const std::vector<IndexPair>& want) {
   for (std::size_t i = 0; i < std::min(got.size(), want.size()); ++i)
     if (got[i] != want[i])
-      return "pair " + std::to_string(i) + ": (" + std::to_string(got[i].a) + ", " + std::to_string(got[i].b) +
-             "), CGAL (" + std::to_string(want[i].a) + ", " + std::to_string(want[i].b) + ")";
-  return got.size() == want.size() ? ""
-                                   : std::to_string(got.size()) + " pairs, CGAL " + std::to_string(want.size());
+      return "pair " + std::to_string(i) + ": (" + std::to_string(got[i].a) + ", " +
+             std::to_string(got[i].b) + "), CGAL (" + std::to_string(want[i].a) + ", " +
+             std::to_string(want[i].b) + ")";
+  return got.size() == want.size()
+             ? ""
+             : std::to_string(got.size()) + " pairs, CGAL " + std::to_string(want.size());
 }
 
 }  // namespace
@@ -121,7 +125,8 @@ TEST_CASE("cgal: 100 frames of motion give CGAL's pairs every frame", "[collide]
   const kdspace::MotionKind kinds[] = {kdspace::MotionKind::brownian, kdspace::MotionKind::free_fall};
   for (const kdspace::MotionKind kind : kinds)
     for (const double share : {1.0, 0.1}) {
-      kdspace::MotionSimulation motion(make_collision_scene(CollisionScene::uniform, 1500, 104), kind, share, 105);
+      kdspace::MotionSimulation motion(make_collision_scene(CollisionScene::uniform, 1500, 104), kind, share,
+                                       105);
       kdspace::MovingScene scene;
       for (int frame = 0; frame < 100; ++frame) {
         const std::vector<Box3f>& boxes = frame == 0 ? motion.boxes() : motion.step();

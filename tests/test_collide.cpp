@@ -91,7 +91,8 @@ std::vector<Box3f> query_boxes(const std::vector<Box3f>& boxes, std::size_t n, s
   const Box3f range = grown_bounds(boxes);
   std::vector<Box3f> queries;
   for (std::size_t q = 0; q < n; ++q) {
-    const Box3f& some = boxes[static_cast<std::size_t>(uniform_int(rng, 0, static_cast<int>(boxes.size()) - 1))];
+    const Box3f& some =
+        boxes[static_cast<std::size_t>(uniform_int(rng, 0, static_cast<int>(boxes.size()) - 1))];
     Box3f b;
     switch (q % 5) {
       case 0:  // random, up to a fifth of the range wide
@@ -131,7 +132,8 @@ std::string describe(const IndexPair& p) {
 /// "" when the lists are equal, else the first difference.
 std::string compare_pairs(const std::vector<IndexPair>& got, const std::vector<IndexPair>& want) {
   for (std::size_t i = 0; i < std::min(got.size(), want.size()); ++i)
-    if (got[i] != want[i]) return "at " + std::to_string(i) + ": got " + describe(got[i]) + ", expected " + describe(want[i]);
+    if (got[i] != want[i])
+      return "at " + std::to_string(i) + ": got " + describe(got[i]) + ", expected " + describe(want[i]);
   if (got.size() != want.size())
     return "got " + std::to_string(got.size()) + " pairs, expected " + std::to_string(want.size());
   return "";
@@ -149,15 +151,17 @@ TEST_CASE("collide: overlapping equals brute force on every scene and build", "[
       const BoxTree tree(boxes, build.params);
       for (std::size_t q = 0; q < queries.size(); ++q) {
         INFO(kdspace_test::name(scene) << ", " << build.name << " build, query " << q);
-        REQUIRE(kdspace::overlapping(tree, queries[q]) == kdspace::brute_force_overlapping(boxes, queries[q]));
+        REQUIRE(kdspace::overlapping(tree, queries[q]) ==
+                kdspace::brute_force_overlapping(boxes, queries[q]));
       }
     }
   }
 }
 
 TEST_CASE("collide: touching counts: a box sharing only a face, an edge or a corner overlaps", "[collide]") {
-  const std::vector<Box3f> boxes = {box_of(0, 0, 0, 1, 1, 1), box_of(1, 0, 0, 2, 1, 1), box_of(1, 1, 0, 2, 2, 1),
-                                    box_of(1, 1, 1, 2, 2, 2), box_of(3, 3, 3, 4, 4, 4)};
+  const std::vector<Box3f> boxes = {box_of(0, 0, 0, 1, 1, 1), box_of(1, 0, 0, 2, 1, 1),
+                                    box_of(1, 1, 0, 2, 2, 1), box_of(1, 1, 1, 2, 2, 2),
+                                    box_of(3, 3, 3, 4, 4, 4)};
   const BoxTree tree(boxes);
   using Ids = std::vector<std::uint32_t>;
   CHECK(kdspace::overlapping(tree, boxes[0]) == Ids{0, 1, 2, 3});
@@ -180,7 +184,8 @@ TEST_CASE("collide: overlapping on an empty tree finds nothing; a bad query box 
   CHECK_THROWS_WITH(kdspace::overlapping_batch(tree, queries), "query 2: min z is inf");
 }
 
-TEST_CASE("collide: overlapping_batch gives the rows of single queries on 1, 2 and 4 threads", "[collide][threads]") {
+TEST_CASE("collide: overlapping_batch gives the rows of single queries on 1, 2 and 4 threads",
+          "[collide][threads]") {
   const std::vector<Box3f> boxes = make_collision_scene(CollisionScene::clustered, 3000, 5);
   const std::vector<Box3f> queries = query_boxes(boxes, 1500, 6);
   const BoxTree tree(boxes);
@@ -221,7 +226,8 @@ TEST_CASE("collide: boxes that only touch in a split plane are paired once", "[c
   // A row of unit cubes along x: the median build splits at their shared faces, so neighbours touch
   // only in split planes and no leaf holds both.
   std::vector<Box3f> row;
-  for (int i = 0; i < 64; ++i) row.push_back(box_of(static_cast<float>(i), 0, 0, static_cast<float>(i + 1), 1, 1));
+  for (int i = 0; i < 64; ++i)
+    row.push_back(box_of(static_cast<float>(i), 0, 0, static_cast<float>(i + 1), 1, 1));
   std::vector<IndexPair> expected;
   for (std::uint32_t i = 0; i + 1 < 64; ++i) expected.push_back({i, i + 1});
   for (const BuildChoice& build : all_builds()) {
@@ -232,7 +238,8 @@ TEST_CASE("collide: boxes that only touch in a split plane are paired once", "[c
 }
 
 TEST_CASE("collide: overlapping_pairs is the same on 1, 2, 3 and 4 threads", "[collide][threads]") {
-  for (const CollisionScene scene : {CollisionScene::uniform, CollisionScene::face_sharing, CollisionScene::flat}) {
+  for (const CollisionScene scene :
+       {CollisionScene::uniform, CollisionScene::face_sharing, CollisionScene::flat}) {
     const std::vector<Box3f> boxes = make_collision_scene(scene, 20000, 21);
     const BoxTree tree(boxes);
     CollideStats one_thread;
@@ -262,7 +269,8 @@ TEST_CASE("collide: overlapping_pairs of two trees equals brute force", "[collid
   }
 }
 
-TEST_CASE("collide: pairs of a tree with itself are the self pairs both ways, and the diagonal", "[collide]") {
+TEST_CASE("collide: pairs of a tree with itself are the self pairs both ways, and the diagonal",
+          "[collide]") {
   const std::vector<Box3f> boxes = make_collision_scene(CollisionScene::face_sharing, 700, 41);
   const BoxTree tree(boxes);
   std::vector<IndexPair> expected;
@@ -329,14 +337,16 @@ TEST_CASE("collide: first_contact equals brute force bit for bit on every scene 
   for (const CollisionScene scene : all_collision_scenes) {
     const std::vector<Box3f> boxes = make_collision_scene(scene, 500, 61);
     const Box3f range = grown_bounds(boxes);
-    const float scale = std::max({range.hi[0] - range.lo[0], range.hi[1] - range.lo[1], range.hi[2] - range.lo[2]});
+    const float scale =
+        std::max({range.hi[0] - range.lo[0], range.hi[1] - range.lo[1], range.hi[2] - range.lo[2]});
     const std::vector<Box3f> moving = query_boxes(boxes, 150, 62);
     const std::vector<Vec3f> motion = motions(moving.size(), scale, 63);
     for (const BuildChoice& build : all_builds()) {
       const BoxTree tree(boxes, build.params);
       for (std::size_t q = 0; q < moving.size(); ++q)
         for (const float t_max : {inf, 1.0f, 0.25f, 0.0f}) {
-          INFO(kdspace_test::name(scene) << ", " << build.name << " build, moving box " << q << ", t_max " << t_max);
+          INFO(kdspace_test::name(scene)
+               << ", " << build.name << " build, moving box " << q << ", t_max " << t_max);
           const Contact got = kdspace::first_contact(tree, moving[q], motion[q], t_max);
           const Contact want = kdspace::brute_force_first_contact(boxes, moving[q], motion[q], t_max);
           REQUIRE(same_contact(got, want));
@@ -345,7 +355,8 @@ TEST_CASE("collide: first_contact equals brute force bit for bit on every scene 
   }
 }
 
-TEST_CASE("collide: contact at t = 0 is exactly overlap now; with t_max = 0 it is overlapping()", "[collide]") {
+TEST_CASE("collide: contact at t = 0 is exactly overlap now; with t_max = 0 it is overlapping()",
+          "[collide]") {
   const std::vector<Box3f> boxes = make_collision_scene(CollisionScene::face_sharing, 800, 71);
   const BoxTree tree(boxes);
   const std::vector<Box3f> moving = query_boxes(boxes, 300, 72);
@@ -368,10 +379,12 @@ TEST_CASE("collide: contact at t = 0 is exactly overlap now; with t_max = 0 it i
   }
 }
 
-TEST_CASE("collide: a box sliding along a face touches it at once; ties go to the smaller index", "[collide]") {
+TEST_CASE("collide: a box sliding along a face touches it at once; ties go to the smaller index",
+          "[collide]") {
   // Boxes 3 and 1 both start at x = 2 (same contact time); box 0 lies behind the mover.
-  const std::vector<Box3f> boxes = {box_of(-3, 0, 0, -2, 1, 1), box_of(2, 0, 0, 3, 1, 1), box_of(5, 0, 0, 6, 1, 1),
-                                    box_of(2, 0.5f, 0, 3, 2, 1), box_of(0, 1, 0, 1, 2, 1)};
+  const std::vector<Box3f> boxes = {box_of(-3, 0, 0, -2, 1, 1), box_of(2, 0, 0, 3, 1, 1),
+                                    box_of(5, 0, 0, 6, 1, 1), box_of(2, 0.5f, 0, 3, 2, 1),
+                                    box_of(0, 1, 0, 1, 2, 1)};
   const BoxTree tree(boxes);
   const Box3f mover = box_of(0, 0, 0, 1, 0.75f, 1);
   CHECK(same_contact(kdspace::first_contact(tree, mover, {1, 0, 0}), Contact{1, 1.0f}));
@@ -389,7 +402,8 @@ TEST_CASE("collide: a box sliding along a face touches it at once; ties go to th
   CHECK(same_contact(kdspace::first_contact(tree, box_of(10, 10, 10, 11, 11, 11), {0, 0, 0}), Contact{}));
 }
 
-TEST_CASE("collide: first_contact_batch gives single answers and stats on 1, 2 and 4 threads", "[collide][threads]") {
+TEST_CASE("collide: first_contact_batch gives single answers and stats on 1, 2 and 4 threads",
+          "[collide][threads]") {
   const std::vector<Box3f> boxes = make_collision_scene(CollisionScene::uniform, 5000, 81);
   const BoxTree tree(boxes);
   const std::vector<Box3f> starts = query_boxes(boxes, 2000, 82);
@@ -398,7 +412,8 @@ TEST_CASE("collide: first_contact_batch gives single answers and stats on 1, 2 a
   for (std::size_t i = 0; i < starts.size(); ++i) moving.push_back({starts[i], motion[i]});
   CollideStats single;
   std::vector<Contact> expected;
-  for (const MovingBox& m : moving) expected.push_back(kdspace::first_contact(tree, m.box, m.motion, 2.0f, &single));
+  for (const MovingBox& m : moving)
+    expected.push_back(kdspace::first_contact(tree, m.box, m.motion, 2.0f, &single));
   for (unsigned threads : {1u, 2u, 4u}) {
     CollideStats stats;
     const std::vector<Contact> got = kdspace::first_contact_batch(tree, moving, 2.0f, threads, &stats);
@@ -419,6 +434,7 @@ TEST_CASE("collide: bad moving boxes, motions and t_max throw an Error", "[colli
   CHECK_THROWS_AS(kdspace::first_contact(tree, ok, {1, 0, 0}, -1), kdspace::Error);
   CHECK_THROWS_AS(kdspace::first_contact(tree, ok, {1, 0, 0}, NAN), kdspace::Error);
   const std::vector<MovingBox> moving = {{ok, {-1, 0, 0}}, {ok, {0, 0, NAN}}};
-  CHECK_THROWS_WITH(kdspace::first_contact_batch(tree, moving), Catch::StartsWith("moving box 2: motion z is"));
+  CHECK_THROWS_WITH(kdspace::first_contact_batch(tree, moving),
+                    Catch::StartsWith("moving box 2: motion z is"));
   CHECK(same_contact(kdspace::first_contact(tree, ok, {-1, 0, 0}), Contact{0, 1.0f}));
 }

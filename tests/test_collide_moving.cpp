@@ -42,7 +42,8 @@ BoxBuildParams with_method(BoxBuildMethod m) {
 
 TEST_CASE("refit: queries after a refit equal brute force on the moved boxes", "[collide][refit]") {
   for (const BoxBuildMethod m : {BoxBuildMethod::median, BoxBuildMethod::sah_nlogn, BoxBuildMethod::binned}) {
-    MotionSimulation motion(make_collision_scene(CollisionScene::uniform, 2000, 3), MotionKind::brownian, 1.0, 4);
+    MotionSimulation motion(make_collision_scene(CollisionScene::uniform, 2000, 3), MotionKind::brownian, 1.0,
+                            4);
     BoxTree tree(motion.boxes(), with_method(m));
     for (int frame = 0; frame < 10; ++frame) {
       const std::vector<Box3f>& boxes = motion.step();
@@ -60,7 +61,8 @@ TEST_CASE("refit: queries after a refit equal brute force on the moved boxes", "
 }
 
 TEST_CASE("refit: refitting the moved boxes only makes the tree of refitting all", "[collide][refit]") {
-  MotionSimulation motion(make_collision_scene(CollisionScene::clustered, 3000, 5), MotionKind::brownian, 0.1, 6);
+  MotionSimulation motion(make_collision_scene(CollisionScene::clustered, 3000, 5), MotionKind::brownian, 0.1,
+                          6);
   BoxTree partial(motion.boxes(), with_method(BoxBuildMethod::binned));
   BoxTree full = partial;
   for (int frame = 0; frame < 5; ++frame) {
@@ -154,11 +156,11 @@ TEST_CASE("moving scene: 100 frames of motion give the brute-force pairs every f
     MotionKind kind;
     double share;
   };
-  const Motion motions[] = {{"brownian, all move", CollisionScene::uniform, MotionKind::brownian, 1.0},
-                            {"free fall, all move", CollisionScene::clustered, MotionKind::free_fall, 1.0},
-                            {"brownian, 10% move", CollisionScene::uniform, MotionKind::brownian, 0.1},
-                            {"free fall, 10% move, face-sharing", CollisionScene::face_sharing, MotionKind::free_fall,
-                             0.1}};
+  const Motion motions[] = {
+      {"brownian, all move", CollisionScene::uniform, MotionKind::brownian, 1.0},
+      {"free fall, all move", CollisionScene::clustered, MotionKind::free_fall, 1.0},
+      {"brownian, 10% move", CollisionScene::uniform, MotionKind::brownian, 0.1},
+      {"free fall, 10% move, face-sharing", CollisionScene::face_sharing, MotionKind::free_fall, 0.1}};
   for (const Motion& m : motions)
     for (const SceneSetup& setup : scene_setups()) {
       MotionSimulation motion(make_collision_scene(m.scene, 400, 11), m.kind, m.share, 12);

@@ -77,18 +77,21 @@ TEST_CASE("pairs io: empty, cut and oversized files are errors naming the sizes"
   CHECK_THROWS_WITH(io::read_pairs(path),
                     path + ": truncated: header says 3 pairs (32 bytes), file has 24 bytes");
   write_raw(path, 1, {0, 1}, 5);
-  CHECK_THROWS_WITH(io::read_pairs(path),
-                    path + ": oversized: header says 1 pairs (16 bytes), file has 21 bytes (5 bytes too many)");
+  CHECK_THROWS_WITH(
+      io::read_pairs(path),
+      path + ": oversized: header says 1 pairs (16 bytes), file has 21 bytes (5 bytes too many)");
   write_raw(path, std::numeric_limits<std::uint64_t>::max(), {0, 1});
-  CHECK_THROWS_WITH(io::read_pairs(path), StartsWith(path + ": truncated: header says 18446744073709551615 pairs"));
+  CHECK_THROWS_WITH(io::read_pairs(path),
+                    StartsWith(path + ": truncated: header says 18446744073709551615 pairs"));
 }
 
 TEST_CASE("pairs io: pairs out of order or repeated name the pair, 1-based", "[io][pairs][errors]") {
   TempDir dir;
   const std::string path = dir.file("order.pairs");
   io::write_pairs(path, std::vector<IndexPair>{{0, 1}, {5, 7}, {5, 3}});
-  CHECK_THROWS_WITH(io::read_pairs(path),
-                    path + ": pair 3: (5, 3) is not after (5, 7) (pairs must be sorted by (a, b), each once)");
+  CHECK_THROWS_WITH(
+      io::read_pairs(path),
+      path + ": pair 3: (5, 3) is not after (5, 7) (pairs must be sorted by (a, b), each once)");
   io::write_pairs(path, std::vector<IndexPair>{{2, 4}, {2, 4}});
   CHECK_THROWS_WITH(io::read_pairs(path), StartsWith(path + ": pair 2: (2, 4) is not after (2, 4)"));
 }

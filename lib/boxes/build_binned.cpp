@@ -54,7 +54,8 @@ constexpr std::size_t small_node = 128;
 /// left empty for route_boxes to fill).
 class PlaneBuilder {
  public:
-  PlaneBuilder(std::vector<Item>& items, std::size_t leaf_size, std::size_t max_depth, std::vector<BoxNode>& nodes)
+  PlaneBuilder(std::vector<Item>& items, std::size_t leaf_size, std::size_t max_depth,
+               std::vector<BoxNode>& nodes)
       : items_(items), leaf_size_(leaf_size), max_depth_(max_depth), nodes_(nodes) {}
 
   std::size_t deepest_leaf = 0;
@@ -68,7 +69,8 @@ class PlaneBuilder {
   }
 
  private:
-  void build(std::size_t begin, std::size_t end, const Box3f& cell, const CentreBounds& centres, std::size_t depth) {
+  void build(std::size_t begin, std::size_t end, const Box3f& cell, const CentreBounds& centres,
+             std::size_t depth) {
     int axis = 0;
     float plane = 0;
     std::size_t middle = 0;
@@ -167,8 +169,8 @@ class PlaneBuilder {
   /// Partitions by centre, gathering each side's centre bounds on the way. False (a leaf) when one
   /// side is empty, or when the plane cuts more than half of the boxes: boxes larger than the cells,
   /// which splitting would only copy into both children again and again.
-  bool partition(Item* first, Item* last, int ax, float plane, std::size_t& middle, CentreBounds& lower_centres,
-                 CentreBounds& upper_centres) {
+  bool partition(Item* first, Item* last, int ax, float plane, std::size_t& middle,
+                 CentreBounds& lower_centres, CentreBounds& upper_centres) {
     lower_centres = bounds_of(first, first);
     upper_centres = lower_centres;
     Item* split = first;

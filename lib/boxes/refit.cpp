@@ -13,11 +13,9 @@ namespace kdspace {
 
 namespace {
 
-/// References are counted in 30 bits (BoxNode).
-constexpr std::size_t reference_limit = (std::size_t{1} << 30) - 1;
-
 void check_boxes(const Box3f* boxes, std::size_t n) {
-  if (n >= (std::size_t{1} << 30)) throw Error("too many boxes: " + std::to_string(n) + " (at most 2^30 - 1)");
+  if (n >= (std::size_t{1} << 30))
+    throw Error("too many boxes: " + std::to_string(n) + " (at most 2^30 - 1)");
   if (n > 0 && boxes == nullptr) throw Error("boxes: null pointer");
   for (std::size_t i = 0; i < n; ++i) {
     const std::string problem = box_problem(boxes[i]);
@@ -89,7 +87,8 @@ bool BoxTree::refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t 
   std::vector<std::uint32_t> entering(entering_box.size());
   {
     std::vector<std::uint32_t> next(entering_first.begin(), entering_first.end() - 1);
-    for (std::size_t e = 0; e < entering_box.size(); ++e) entering[next[entering_leaf[e]]++] = entering_box[e];
+    for (std::size_t e = 0; e < entering_box.size(); ++e)
+      entering[next[entering_leaf[e]]++] = entering_box[e];
   }
   std::vector<char> moved_flag(boxes_.size(), 0);
   for (std::size_t k = 0; k < m; ++k) moved_flag[moved[k]] = 1;
@@ -107,11 +106,12 @@ bool BoxTree::refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t 
       count = entering_count[node];
       for (std::uint32_t r = 0; r < at.count(); ++r) count += is_moved(ref[r]) ? 0 : 1;
     }
-    if (total + count > reference_limit) return false;
+    if (total + count > detail::reference_limit) return false;
     nodes[node] = BoxNode::leaf(static_cast<std::uint32_t>(total), static_cast<std::uint32_t>(count));
     total += count;
   }
-  const double budget = static_cast<double>(params_.max_references_per_box) * static_cast<double>(boxes_.size());
+  const double budget =
+      static_cast<double>(params_.max_references_per_box) * static_cast<double>(boxes_.size());
   if (static_cast<double>(total) > budget) return false;
 
   // Runs of unchanged leaves are copied as blocks (they are contiguous in both lists); changed leaves

@@ -16,6 +16,9 @@
 
 namespace kdspace::detail {
 
+/// The most references a tree holds: they are counted in 30 bits (BoxNode).
+inline constexpr std::size_t reference_limit = (std::size_t{1} << 30) - 1;
+
 /// Calls leaf(node) for every leaf of `nodes` that box b goes to.
 template <class Leaf>
 void for_each_leaf_of(const std::vector<BoxNode>& nodes, const Box3f& b, Leaf&& leaf) {

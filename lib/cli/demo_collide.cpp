@@ -42,14 +42,16 @@ bool queries_exact(Context& context, const BoxTree& tree, const std::vector<Box3
   const std::size_t stride = std::max<std::size_t>(1, boxes.size() / 200);
   for (std::size_t i = 0; i < boxes.size(); i += stride) {
     if (overlapping(tree, boxes[i]) != brute_force_overlapping(boxes, boxes[i])) {
-      context.fail("collisions: overlap query of box " + std::to_string(i + 1) + " disagrees with brute force");
+      context.fail("collisions: overlap query of box " + std::to_string(i + 1) +
+                   " disagrees with brute force");
       return false;
     }
     const Vec3f motion{0.05f, -0.02f, 0.01f * static_cast<float>(i % 5)};
     const Contact got = first_contact(tree, boxes[i], motion);
     const Contact want = brute_force_first_contact(boxes, boxes[i], motion);
     if (got.box != want.box || got.t != want.t) {
-      context.fail("collisions: first contact of box " + std::to_string(i + 1) + " disagrees with brute force");
+      context.fail("collisions: first contact of box " + std::to_string(i + 1) +
+                   " disagrees with brute force");
       return false;
     }
   }
@@ -83,8 +85,8 @@ void collision_step(Context& context) {
   const std::vector<IndexPair> expected = brute_force_pairs(boxes);
   context.report("\n## Collisions: all overlapping pairs of " + with_commas(static_cast<double>(n)) +
                  " boxes in Gaussian clusters\n\n"
-                 "| build | build s | pairs s (1 thread) | pairs s (" + all_label +
-                 ") | pairs | exact |\n|---|---:|---:|---:|---:|---|\n");
+                 "| build | build s | pairs s (1 thread) | pairs s (" +
+                 all_label + ") | pairs | exact |\n|---|---:|---:|---:|---:|---|\n");
   for (const BoxBuildMethod method : {BoxBuildMethod::binned, BoxBuildMethod::sah_nlogn}) {
     BoxBuildParams params;
     params.method = method;
@@ -105,8 +107,9 @@ void collision_step(Context& context) {
                    fixed(many_s, 3) + " | " + with_commas(static_cast<double>(one.size())) + " | " +
                    (exact ? "yes" : "NO") + " |\n");
   }
-  context.report("\nExact: the pairs equal a brute-force sweep along x; 200 overlap queries and first contacts "
-                 "equal testing every box.\n");
+  context.report(
+      "\nExact: the pairs equal a brute-force sweep along x; 200 overlap queries and first contacts "
+      "equal testing every box.\n");
 
   // ---- moving boxes ----
   const std::size_t m = s.quick ? 2000 : 20000;
@@ -114,9 +117,11 @@ void collision_step(Context& context) {
   const MotionChoice motions[] = {{"Brownian, all move", MotionKind::brownian, 1.0},
                                   {"free fall, all move", MotionKind::free_fall, 1.0},
                                   {"Brownian, 10% move", MotionKind::brownian, 0.1}};
-  context.report("\n## Collisions of " + with_commas(static_cast<double>(m)) + " moving boxes (half the mean spacing), " +
-                 std::to_string(frames) + " frames (MovingScene, " + all_label +
-                 ")\n\n| motion | ms a frame | pairs a frame | rebuilds | exact |\n|---|---:|---:|---:|---|\n");
+  context.report(
+      "\n## Collisions of " + with_commas(static_cast<double>(m)) +
+      " moving boxes (half the mean spacing), " + std::to_string(frames) + " frames (MovingScene, " +
+      all_label +
+      ")\n\n| motion | ms a frame | pairs a frame | rebuilds | exact |\n|---|---:|---:|---:|---|\n");
   std::vector<Box3f> last_frame;
   std::vector<IndexPair> last_pairs;
   for (const MotionChoice& motion : motions) {
@@ -141,16 +146,17 @@ void collision_step(Context& context) {
       }
     }
     context.report("| " + std::string(motion.name) + " | " + fixed(1000 * seconds / frames, 2) + " | " +
-                   with_commas(static_cast<double>(pairs) / frames) + " | " + std::to_string(rebuilds) + " | " +
-                   (exact ? "yes" : "NO") + " |\n");
+                   with_commas(static_cast<double>(pairs) / frames) + " | " + std::to_string(rebuilds) +
+                   " | " + (exact ? "yes" : "NO") + " |\n");
     if (motion.kind == MotionKind::free_fall && motion.moving_share == 1.0) {
       last_frame = simulation.boxes();
       last_pairs = scene.pairs();
     }
   }
-  context.report("\nThe tree is refitted each frame (planes kept, boxes sent down again) and rebuilt when its "
-                 "leaves have come to cost 1.5 times the box tests they cost when built; when few boxes move, "
-                 "only they look for partners. Exact: every tenth frame equals a brute-force sweep.\n");
+  context.report(
+      "\nThe tree is refitted each frame (planes kept, boxes sent down again) and rebuilt when its "
+      "leaves have come to cost 1.5 times the box tests they cost when built; when few boxes move, "
+      "only they look for partners. Exact: every tenth frame equals a brute-force sweep.\n");
 
   // ---- the picture: the last frame of the free fall, colliding boxes in red ----
   if (s.out_dir.empty()) {
@@ -165,7 +171,8 @@ void collision_step(Context& context) {
   render.threads = s.threads;
   render.box_colours.resize(last_frame.size());
   for (std::size_t i = 0; i < last_frame.size(); ++i)
-    render.box_colours[i] = colliding[i] ? std::array<float, 3>{0.95f, 0.2f, 0.15f} : std::array<float, 3>{0.55f, 0.7f, 0.9f};
+    render.box_colours[i] =
+        colliding[i] ? std::array<float, 3>{0.95f, 0.2f, 0.15f} : std::array<float, 3>{0.55f, 0.7f, 0.9f};
   const BoxTree tree(last_frame);
   const Image image = render_image(tree, render);
   const std::string picture = context.out_path("collisions.png");

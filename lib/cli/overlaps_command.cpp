@@ -77,7 +77,8 @@ int overlaps_command(const std::vector<std::string>& args) {
   const Clock::time_point start = Clock::now();
   {
     Progress progress("finding pairs", Progress::Kind::elapsed);
-    pairs = two_sets ? overlapping_pairs(tree, other_tree, threads, &stats) : overlapping_pairs(tree, threads, &stats);
+    pairs = two_sets ? overlapping_pairs(tree, other_tree, threads, &stats)
+                     : overlapping_pairs(tree, threads, &stats);
   }
   const double query_s = seconds_since(start);
 

@@ -11,13 +11,14 @@
 // (equality matters for the tie rule). Interval ends are widened by a relative margin far above double
 // rounding, so no leaf that holds the winning box is skipped: the answer is that of testing every box
 // (brute_force_first_contact), bit for bit.
+#include "kdspace/collide/contact.hpp"
+
 #include <array>
 #include <cmath>
 #include <limits>
 #include <string>
 #include <vector>
 
-#include "kdspace/collide/contact.hpp"
 #include "kdspace/collide/detail/contact_window.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/parallel.hpp"
@@ -60,7 +61,8 @@ std::string moving_problem(const Box3f& box, const Vec3f& motion) {
   if (!problem.empty()) return problem;
   constexpr const char* axis_name[3] = {"x", "y", "z"};
   for (int a = 0; a < 3; ++a)
-    if (!std::isfinite(motion[a])) return std::string("motion ") + axis_name[a] + " is " + std::to_string(motion[a]);
+    if (!std::isfinite(motion[a]))
+      return std::string("motion ") + axis_name[a] + " is " + std::to_string(motion[a]);
   return {};
 }
 

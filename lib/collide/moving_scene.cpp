@@ -82,7 +82,8 @@ const std::vector<IndexPair>& MovingScene::step(const Box3f* boxes, std::size_t 
   } else if (!moved_.empty()) {
     // Few moved: refit those only. Many: send every box down once, which costs less per box than
     // merging the moved boxes' references into the leaves' lists.
-    const bool refitted = few_moved ? tree_->refit(boxes, moved_.data(), moved_.size()) : tree_->refit(boxes, n);
+    const bool refitted =
+        few_moved ? tree_->refit(boxes, moved_.data(), moved_.size()) : tree_->refit(boxes, n);
     if (!refitted || leaf_test_cost(*tree_) > params_.rebuild_factor * built_cost_) {
       rebuild(boxes, n);
       stats.rebuilt = true;
@@ -126,11 +127,14 @@ void MovingScene::find_pairs_of_moved(const Box3f* boxes) {
                               [&](const IndexPair& p) { return is_moved_[p.a] || is_moved_[p.b]; }),
                pairs_.end());
 
-  const OverlapLists partners = overlapping_batch(*tree_, [&] {
-    std::vector<Box3f> queries(moved_.size());
-    for (std::size_t k = 0; k < moved_.size(); ++k) queries[k] = boxes[moved_[k]];
-    return queries;
-  }(), params_.threads);
+  const OverlapLists partners = overlapping_batch(
+      *tree_,
+      [&] {
+        std::vector<Box3f> queries(moved_.size());
+        for (std::size_t k = 0; k < moved_.size(); ++k) queries[k] = boxes[moved_[k]];
+        return queries;
+      }(),
+      params_.threads);
   fresh_.clear();
   for (std::size_t k = 0; k < moved_.size(); ++k) {
     const std::uint32_t i = moved_[k];

@@ -41,7 +41,25 @@ void overlapping_in_leaf(const TreeAccess& tree, NodeId leaf, const Box3f& cell,
   const Box3f* boxes = tree.leaf_boxes(leaf);
   stats.boxes_tested += count;
   for (std::uint32_t i = 0; i < count; ++i)
-    if (query.overlaps(boxes[i]) && owns(cell, boxes[i], pair_point(query, boxes[i]))) ids.push_back(leaf_ids[i]);
+    if (query.overlaps(boxes[i]) && owns(cell, boxes[i], pair_point(query, boxes[i])))
+      ids.push_back(leaf_ids[i]);
+}
+
+/// The rule shared by the pair searches: box b, met in a leaf of cell `cell`, against every box of
+/// `leaf` (cell `leaf_cell`, maybe of another tree); emit(id) for each box that overlaps b where
+/// both leaves own the pair point.
+template <class Emit>
+void pair_with_leaf(const Box3f& b, const Box3f& cell, const TreeAccess& tree, NodeId leaf,
+                    const Box3f& leaf_cell, CollideStats& stats, Emit&& emit) {
+  const std::uint32_t count = tree.leaf_size(leaf);
+  const std::uint32_t* ids = tree.leaf_ids(leaf);
+  const Box3f* boxes = tree.leaf_boxes(leaf);
+  stats.boxes_tested += count;
+  for (std::uint32_t y = 0; y < count; ++y) {
+    if (!b.overlaps(boxes[y])) continue;
+    const auto c = pair_point(b, boxes[y]);
+    if (owns(cell, b, c) && owns(leaf_cell, boxes[y], c)) emit(ids[y]);
+  }
 }
 
 void overlapping_into(const TreeAccess& tree, const Box3f& query, std::vector<std::uint32_t>& ids,
@@ -96,19 +114,27 @@ void pairs_of_leaf(const TreeAccess& tree, const NodeAndCell& leaf, std::vector<
     Box3f region;
     if (!beyond_region(bx, cell, tree.root_cell(), region)) continue;
     const NodeId rank = tree.leaf_rank(leaf.node);
-    detail::for_each_leaf_touching(tree, region, stats.nodes_visited, [&](NodeId other, const Box3f& other_cell) {
-      if (tree.leaf_rank(other) <= rank) return;
-      const std::uint32_t other_count = tree.leaf_size(other);
-      const std::uint32_t* other_ids = tree.leaf_ids(other);
-      const Box3f* other_boxes = tree.leaf_boxes(other);
-      stats.boxes_tested += other_count;
-      for (std::uint32_t y = 0; y < other_count; ++y) {
-        const Box3f& by = other_boxes[y];
-        if (!bx.overlaps(by)) continue;
-        const auto c = pair_point(bx, by);
-        if (owns(cell, bx, c) && owns(other_cell, by, c))
-          out.push_back({std::min(ids[x], other_ids[y]), std::max(ids[x], other_ids[y])});
-      }
+    detail::for_each_leaf_touching(
+        tree, region, stats.nodes_visited, [&](NodeId other, const Box3f& other_cell) {
+          if (tree.leaf_rank(other) <= rank) return;
+          pair_with_leaf(bx, cell, tree, other, other_cell, stats, [&](std::uint32_t id) {
+            out.push_back({std::min(ids[x], id), std::max(ids[x], id)});
+          });
+        });
+  }
+}
+
+/// The pairs of a leaf of one tree and a leaf of another: each box of the first that reaches the
+/// second's cell, against the second's boxes.
+void pairs_of_leaf_pair(const TreeAccess& ta, const NodeAndCell& a, const TreeAccess& tb,
+                        const NodeAndCell& b, std::vector<IndexPair>& out, CollideStats& stats) {
+  const std::uint32_t count = ta.leaf_size(a.node);
+  const std::uint32_t* ids = ta.leaf_ids(a.node);
+  const Box3f* boxes = ta.leaf_boxes(a.node);
+  for (std::uint32_t x = 0; x < count; ++x) {
+    if (!boxes[x].overlaps(b.cell)) continue;
+    pair_with_leaf(boxes[x], a.cell, tb, b.node, b.cell, stats, [&](std::uint32_t id) {
+      out.push_back({ids[x], id});
     });
   }
 }
@@ -182,7 +208,7 @@ std::vector<IndexPair> overlapping_pairs(const BoxTree& tree, unsigned threads, 
                        });
   if (stats) {
     ++stats->queries;
-    stats->nodes_visited += access.empty() ? 0 : 2 * leaves.size();
+    stats->nodes_visited += tree.node_count();  // the walk to the leaves
     for (const CollideStats& s : per_worker) *stats += s;
   }
   return detail::merge_and_sort(found, tree.size());
@@ -193,31 +219,18 @@ std::vector<IndexPair> overlapping_pairs(const BoxTree& tree, const BoxTree& oth
   const TreeAccess ta(tree), tb(other);
   const unsigned workers = detail::resolve_threads(threads);
   // Several tasks a thread, so that an uneven split still keeps the threads busy.
-  const std::vector<detail::NodePair> tasks = detail::node_pair_tasks(ta, tb, workers == 1 ? 1 : 16 * workers);
+  const std::vector<detail::NodePair> tasks =
+      detail::node_pair_tasks(ta, tb, workers == 1 ? 1 : 16 * workers);
   std::vector<std::vector<IndexPair>> found(workers);
   std::vector<CollideStats> per_worker(workers);
   detail::parallel_for(tasks.size(), workers, 1, [&](std::size_t begin, std::size_t end, unsigned worker) {
     std::vector<IndexPair>& out = found[worker];
     CollideStats& local = per_worker[worker];
     for (std::size_t t = begin; t < end; ++t)
-      detail::for_each_leaf_pair(
-          ta, tb, tasks[t], local.nodes_visited,
-          [&](NodeId leaf_a, const Box3f& cell_a, NodeId leaf_b, const Box3f& cell_b) {
-            const std::uint32_t count_a = ta.leaf_size(leaf_a), count_b = tb.leaf_size(leaf_b);
-            const std::uint32_t *ids_a = ta.leaf_ids(leaf_a), *ids_b = tb.leaf_ids(leaf_b);
-            const Box3f *boxes_a = ta.leaf_boxes(leaf_a), *boxes_b = tb.leaf_boxes(leaf_b);
-            for (std::uint32_t x = 0; x < count_a; ++x) {
-              const Box3f& bx = boxes_a[x];
-              if (!bx.overlaps(cell_b)) continue;
-              local.boxes_tested += count_b;
-              for (std::uint32_t y = 0; y < count_b; ++y) {
-                const Box3f& by = boxes_b[y];
-                if (!bx.overlaps(by)) continue;
-                const auto c = pair_point(bx, by);
-                if (owns(cell_a, bx, c) && owns(cell_b, by, c)) out.push_back({ids_a[x], ids_b[y]});
-              }
-            }
-          });
+      detail::for_each_leaf_pair(ta, tb, tasks[t], local.nodes_visited,
+                                 [&](NodeId leaf_a, const Box3f& cell_a, NodeId leaf_b, const Box3f& cell_b) {
+                                   pairs_of_leaf_pair(ta, {leaf_a, cell_a}, tb, {leaf_b, cell_b}, out, local);
+                                 });
   });
   if (stats) {
     ++stats->queries;

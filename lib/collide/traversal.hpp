@@ -121,9 +121,13 @@ void for_each_leaf_pair(const TreeAccess& ta, const TreeAccess& tb, const NodePa
     if (leaf_a && leaf_b) {
       visit(at.a.node, at.a.cell, at.b.node, at.b.cell);
     } else if (split_first_of_pair(ta, at.a, tb, at.b)) {
-      children_touching(ta, at.a, at.b.cell, [&](const NodeAndCell& child) { stack.push_back({child, at.b}); });
+      children_touching(ta, at.a, at.b.cell, [&](const NodeAndCell& child) {
+        stack.push_back({child, at.b});
+      });
     } else {
-      children_touching(tb, at.b, at.a.cell, [&](const NodeAndCell& child) { stack.push_back({at.a, child}); });
+      children_touching(tb, at.b, at.a.cell, [&](const NodeAndCell& child) {
+        stack.push_back({at.a, child});
+      });
     }
   }
 }
@@ -144,10 +148,14 @@ inline std::vector<NodePair> node_pair_tasks(const TreeAccess& ta, const TreeAcc
       if (ta.is_leaf(at.a.node) && tb.is_leaf(at.b.node)) {
         next.push_back(at);
       } else if (split_first_of_pair(ta, at.a, tb, at.b)) {
-        children_touching(ta, at.a, at.b.cell, [&](const NodeAndCell& child) { next.push_back({child, at.b}); });
+        children_touching(ta, at.a, at.b.cell, [&](const NodeAndCell& child) {
+          next.push_back({child, at.b});
+        });
         split_any = true;
       } else {
-        children_touching(tb, at.b, at.a.cell, [&](const NodeAndCell& child) { next.push_back({at.a, child}); });
+        children_touching(tb, at.b, at.a.cell, [&](const NodeAndCell& child) {
+          next.push_back({at.a, child});
+        });
         split_any = true;
       }
     }

@@ -17,7 +17,8 @@ constexpr std::uint64_t header_bytes = 8;
 
 }  // namespace
 
-std::uint64_t open_and_count(const std::string& path, File& file, std::uint64_t record_bytes, const char* noun) {
+std::uint64_t open_and_count(const std::string& path, File& file, std::uint64_t record_bytes,
+                             const char* noun) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) fail(path, "is a directory");
   file.reset(std::fopen(path.c_str(), "rb"));
@@ -68,7 +69,8 @@ AtomicFile::~AtomicFile() {
 }
 
 void AtomicFile::write(const void* data, std::size_t bytes) {
-  if (std::fwrite(data, 1, bytes, file_) != bytes) fail(path_, std::string("write error: ") + std::strerror(errno));
+  if (std::fwrite(data, 1, bytes, file_) != bytes)
+    fail(path_, std::string("write error: ") + std::strerror(errno));
 }
 
 void AtomicFile::commit() {

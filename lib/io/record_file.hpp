@@ -30,7 +30,8 @@ using File = std::unique_ptr<std::FILE, FileCloser>;
 /// Opens `path` and returns its record count, checked against the file's size ("truncated: header
 /// says 100 boxes (2408 bytes), file has 1000 bytes"); `noun` names a record in messages. A file of
 /// zero bytes is an error; a count of 0 is a valid, empty file.
-std::uint64_t open_and_count(const std::string& path, File& file, std::uint64_t record_bytes, const char* noun);
+std::uint64_t open_and_count(const std::string& path, File& file, std::uint64_t record_bytes,
+                             const char* noun);
 
 /// A file written under a temporary name in the same folder and renamed over `path` by commit(), so
 /// that `path` is never seen half written and an old file of that name survives a failed write.

@@ -17,7 +17,8 @@
 namespace kdspace {
 
 /// The ids of the boxes that overlap `query` (closed), ascending: every box tested.
-inline std::vector<std::uint32_t> brute_force_overlapping(const std::vector<Box3f>& boxes, const Box3f& query) {
+inline std::vector<std::uint32_t> brute_force_overlapping(const std::vector<Box3f>& boxes,
+                                                          const Box3f& query) {
   std::vector<std::uint32_t> ids;
   for (std::size_t i = 0; i < boxes.size(); ++i)
     if (boxes[i].overlaps(query)) ids.push_back(static_cast<std::uint32_t>(i));
@@ -45,7 +46,8 @@ inline std::vector<IndexPair> brute_force_pairs(const std::vector<Box3f>& boxes)
 }
 
 /// Every pair (a, b) with box a of `first` overlapping box b of `second`, sorted: every pair tested.
-inline std::vector<IndexPair> brute_force_pairs(const std::vector<Box3f>& first, const std::vector<Box3f>& second) {
+inline std::vector<IndexPair> brute_force_pairs(const std::vector<Box3f>& first,
+                                                const std::vector<Box3f>& second) {
   std::vector<IndexPair> pairs;
   for (std::size_t a = 0; a < first.size(); ++a)
     for (std::size_t b = 0; b < second.size(); ++b)
@@ -57,7 +59,8 @@ inline std::vector<IndexPair> brute_force_pairs(const std::vector<Box3f>& first,
 /// The first contact of `moving` + t * motion, t in [0, t_max], with any of the boxes: every box's
 /// contact window computed as the tree computes it (detail::contact_window), the smallest t kept,
 /// equal t to the smaller index. The t is the double rounded to float, as first_contact reports it.
-inline Hit brute_force_first_contact(const std::vector<Box3f>& boxes, const Box3f& moving, const Vec3f& motion,
+inline Hit brute_force_first_contact(const std::vector<Box3f>& boxes, const Box3f& moving,
+                                     const Vec3f& motion,
                                      float t_max = std::numeric_limits<float>::infinity()) {
   const detail::PreparedMotion m(moving, motion);
   double best_t = std::numeric_limits<double>::infinity();

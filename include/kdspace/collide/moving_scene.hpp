@@ -61,11 +61,11 @@ struct MovingSceneParams {
 struct FrameStats {
   std::size_t frame = 0;  ///< 1 for the first step
   std::size_t boxes = 0;
-  std::size_t moved = 0;      ///< boxes that differ from the previous frame (all of them in the first)
-  bool rebuilt = false;       ///< the tree was built anew (else refitted)
-  bool incremental = false;   ///< only the moved boxes looked for partners
-  double update_s = 0;        ///< wall seconds to bring the tree up to date
-  double pairs_s = 0;         ///< wall seconds to find the pairs
+  std::size_t moved = 0;     ///< boxes that differ from the previous frame (all of them in the first)
+  bool rebuilt = false;      ///< the tree was built anew (else refitted)
+  bool incremental = false;  ///< only the moved boxes looked for partners
+  double update_s = 0;       ///< wall seconds to bring the tree up to date
+  double pairs_s = 0;        ///< wall seconds to find the pairs
   std::size_t pairs = 0;
 };
 
@@ -81,7 +81,9 @@ class MovingScene {
   /// is the scene's own and valid until the next step. Throws Error for a bad box, naming it (1-based)
   /// as the BoxTree constructor does; the scene is then as before the step.
   const std::vector<IndexPair>& step(const Box3f* boxes, std::size_t n);
-  const std::vector<IndexPair>& step(const std::vector<Box3f>& boxes) { return step(boxes.data(), boxes.size()); }
+  const std::vector<IndexPair>& step(const std::vector<Box3f>& boxes) {
+    return step(boxes.data(), boxes.size());
+  }
 
   /// The pairs of the last step (empty before the first).
   const std::vector<IndexPair>& pairs() const { return pairs_; }

@@ -42,7 +42,8 @@ struct CollideStats {
 
 /// The ids of the boxes of `tree` that overlap `query`, ascending. Throws Error for a query box that
 /// is not finite or has min > max ("query box: min x 3 > max x 1").
-std::vector<std::uint32_t> overlapping(const BoxTree& tree, const Box3f& query, CollideStats* stats = nullptr);
+std::vector<std::uint32_t> overlapping(const BoxTree& tree, const Box3f& query,
+                                       CollideStats* stats = nullptr);
 
 /// The answers of many overlap queries, stored flat: row q is ids[offsets[q] .. offsets[q + 1]).
 struct OverlapLists {
@@ -79,7 +80,8 @@ inline OverlapLists overlapping_batch(const BoxTree& tree, const std::vector<Box
 /// they only touch, in a split plane that one of them ends on. So a box whose upper face lies on its
 /// leaf's upper face looks for partners in the leaves beyond (an overlap query, kept to leaves to the
 /// right of its own); in general position there are almost none of these.
-std::vector<IndexPair> overlapping_pairs(const BoxTree& tree, unsigned threads = 1, CollideStats* stats = nullptr);
+std::vector<IndexPair> overlapping_pairs(const BoxTree& tree, unsigned threads = 1,
+                                         CollideStats* stats = nullptr);
 
 /// Every pair (a, b) with box a of `tree` overlapping box b of `other`, sorted by (a, b): a traversal
 /// of both trees at once (pairs of nodes whose closed cells meet, down to pairs of leaves). On
