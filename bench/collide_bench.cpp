@@ -228,9 +228,9 @@ btVector3 hi_of(const Box3f& b) {
   return btVector3(b.hi[0], b.hi[1], b.hi[2]);
 }
 
-/// Bullet's pair cache as sorted (a, b) pairs of box indices (kept to the boxes that overlap when
-/// `exact`).
-Pairs bullet_pairs(btBroadphaseInterface& broadphase, const std::vector<Box3f>& boxes, bool exact) {
+/// Bullet's pair cache as (a, b) pairs of box indices, a < b, in its order; kept to the boxes that
+/// overlap when `exact` (its fattened or quantised boxes report more).
+Pairs read_bullet_pairs(btBroadphaseInterface& broadphase, const std::vector<Box3f>& boxes, bool exact) {
   const btBroadphasePairArray& array = broadphase.getOverlappingPairCache()->getOverlappingPairArray();
   Pairs pairs;
   pairs.reserve(static_cast<std::size_t>(array.size()));
@@ -242,7 +242,6 @@ Pairs bullet_pairs(btBroadphaseInterface& broadphase, const std::vector<Box3f>& 
     if (exact && !boxes[a].overlaps(boxes[b])) continue;
     pairs.push_back({std::min(a, b), std::max(a, b)});
   }
-  std::sort(pairs.begin(), pairs.end());
   return pairs;
 }
 
@@ -315,16 +314,7 @@ Pairs run_dbvt(const std::vector<Box3f>& boxes, double& build_s, double& total_s
     broadphase.createProxy(lo_of(boxes[i]), hi_of(boxes[i]), 0, client_of(i), 1, -1, nullptr);
   build_s = seconds_since(start);
   broadphase.calculateOverlappingPairs(nullptr);
-  const btBroadphasePairArray& array = broadphase.getOverlappingPairCache()->getOverlappingPairArray();
-  Pairs pairs;
-  pairs.reserve(static_cast<std::size_t>(array.size()));
-  for (int i = 0; i < array.size(); ++i) {
-    const auto a =
-        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy0->m_clientObject));
-    const auto b =
-        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy1->m_clientObject));
-    pairs.push_back({std::min(a, b), std::max(a, b)});
-  }
+  Pairs pairs = read_bullet_pairs(broadphase, boxes, false);
   total_s = seconds_since(start);
   std::sort(pairs.begin(), pairs.end());
   return pairs;
@@ -337,16 +327,7 @@ Pairs run_sap(const std::vector<Box3f>& boxes, double& build_s, double& total_s)
     sap->createProxy(lo_of(boxes[i]), hi_of(boxes[i]), 0, client_of(i), 1, -1, nullptr);
   build_s = seconds_since(start);
   sap->calculateOverlappingPairs(nullptr);
-  const btBroadphasePairArray& array = sap->getOverlappingPairCache()->getOverlappingPairArray();
-  Pairs pairs;
-  pairs.reserve(static_cast<std::size_t>(array.size()));
-  for (int i = 0; i < array.size(); ++i) {
-    const auto a =
-        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy0->m_clientObject));
-    const auto b =
-        static_cast<std::uint32_t>(reinterpret_cast<std::uintptr_t>(array[i].m_pProxy1->m_clientObject));
-    if (boxes[a].overlaps(boxes[b])) pairs.push_back({std::min(a, b), std::max(a, b)});
-  }
+  Pairs pairs = read_bullet_pairs(*sap, boxes, true);
   total_s = seconds_since(start);
   std::sort(pairs.begin(), pairs.end());
   return pairs;
@@ -472,7 +453,11 @@ class BulletMoving : public MovingContender {
       broadphase_->setAabb(proxies_[i], lo_of(boxes[i]), hi_of(boxes[i]), nullptr);
     broadphase_->calculateOverlappingPairs(nullptr);
   }
-  Pairs pairs(const std::vector<Box3f>& boxes) override { return bullet_pairs(*broadphase_, boxes, true); }
+  Pairs pairs(const std::vector<Box3f>& boxes) override {
+    Pairs pairs = read_bullet_pairs(*broadphase_, boxes, true);
+    std::sort(pairs.begin(), pairs.end());
+    return pairs;
+  }
 
  private:
   bool sap_;

@@ -77,11 +77,9 @@ std::string ray_problem(const Ray& ray) {
   return {};
 }
 
-BoxTree::BoxTree(const std::vector<Box3f>& boxes, const BoxBuildParams& params)
-    : BoxTree(boxes.data(), boxes.size(), params) {}
+namespace detail {
 
-BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params) : params_(params) {
-  check_params(params);
+void check_boxes(const Box3f* boxes, std::size_t n) {
   // Every box is referenced by at least one leaf, and references are counted in 30 bits.
   if (n >= (std::size_t{1} << 30))
     throw Error("too many boxes: " + std::to_string(n) + " (at most 2^30 - 1)");
@@ -90,6 +88,16 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
     const std::string problem = box_problem(boxes[i]);
     if (!problem.empty()) throw Error("box " + std::to_string(i + 1) + ": " + problem);
   }
+}
+
+}  // namespace detail
+
+BoxTree::BoxTree(const std::vector<Box3f>& boxes, const BoxBuildParams& params)
+    : BoxTree(boxes.data(), boxes.size(), params) {}
+
+BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params) : params_(params) {
+  check_params(params);
+  detail::check_boxes(boxes, n);
 
   const auto start = std::chrono::steady_clock::now();
   boxes_.assign(boxes, boxes + n);

@@ -230,6 +230,10 @@ void build_subtree(const Method& method, typename Method::Work work, const Box3f
   }
 }
 
+/// Throws Error for n >= 2^30 (references are counted in 30 bits), a null pointer, or the first box
+/// that is not finite or has min > max ("box 17: min x 3 > max x 1", 1-based).
+void check_boxes(const Box3f* boxes, std::size_t n);
+
 /// The reference budget of the root.
 inline double root_budget(const BoxBuildParams& params, std::size_t n) {
   return static_cast<double>(params.max_references_per_box) * static_cast<double>(n);

@@ -7,21 +7,12 @@
 
 #include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/error.hpp"
+#include "build_common.hpp"
 #include "route.hpp"
 
 namespace kdspace {
 
 namespace {
-
-void check_boxes(const Box3f* boxes, std::size_t n) {
-  if (n >= (std::size_t{1} << 30))
-    throw Error("too many boxes: " + std::to_string(n) + " (at most 2^30 - 1)");
-  if (n > 0 && boxes == nullptr) throw Error("boxes: null pointer");
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::string problem = box_problem(boxes[i]);
-    if (!problem.empty()) throw Error("box " + std::to_string(i + 1) + ": " + problem);
-  }
-}
 
 /// Grows `cell` to hold b.
 void include(Box3f& cell, const Box3f& b) {
@@ -38,7 +29,7 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 }  // namespace
 
 bool BoxTree::refit(const Box3f* boxes, std::size_t n) {
-  check_boxes(boxes, n);
+  detail::check_boxes(boxes, n);
   const auto start = std::chrono::steady_clock::now();
   const auto budget =
       static_cast<std::size_t>(static_cast<double>(params_.max_references_per_box) * static_cast<double>(n));
