@@ -8,13 +8,13 @@
 // place of the plane. Nothing is grown or rebuilt: the tree is the scene's.
 //
 // Exactness. The grown box is never formed (its half extents would be rounded). Each contact time
-// is computed in double from the float coordinates, (S.lo[a] - M.hi[a]) / motion[a] and
-// (S.hi[a] - M.lo[a]) / motion[a], with the reciprocal of the motion precomputed; a difference of
-// two floats keeps its sign in double, so contact at t = 0 happens exactly when the boxes overlap
-// (closed: touching counts), as overlapping() decides. Ties at equal t (in double) go to the smaller
-// box index, as for rays. The traversal widens its slabs by a relative margin far above double
-// rounding, so it never skips a leaf whose box would win: the answer equals brute_force_first_contact
-// bit for bit. The reported t is the double rounded to float.
+// is computed in double from the float coordinates, (S.lo[a] - M.hi[a]) * (1 / motion[a]) and
+// (S.hi[a] - M.lo[a]) * (1 / motion[a]) with the reciprocal precomputed (detail::contact_window); a
+// difference of two floats keeps its sign in double, so contact at t = 0 happens exactly when the
+// boxes overlap (closed: touching counts), as overlapping() decides. Ties at equal t (in double) go
+// to the smaller box index, as for rays. The traversal widens its slabs by a relative margin far
+// above double rounding, so it never skips a leaf whose box would win: the answer equals
+// brute_force_first_contact bit for bit. The reported t is the double rounded to float.
 #pragma once
 
 #include <cstddef>
