@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -21,6 +22,7 @@ using kdspace::BoxBuildMethod;
 using kdspace::BoxBuildParams;
 using kdspace::BoxTree;
 using kdspace::IndexPair;
+using kdspace::LeafBlock;
 using kdspace::MotionKind;
 using kdspace::MotionSimulation;
 using kdspace::MovingScene;
@@ -31,6 +33,27 @@ using kdspace_test::CollisionScene;
 using kdspace_test::make_collision_scene;
 
 namespace {
+
+/// The leaf layout after a refit: each leaf's references padded to a multiple of 4 with its last
+/// index, and the leaf blocks holding box(references()[r]) in lane r % 4 of block r / 4.
+void check_layout(const BoxTree& tree) {
+  const auto& refs = tree.references();
+  const auto& blocks = tree.leaf_blocks();
+  REQUIRE(refs.size() == 4 * blocks.size());
+  std::size_t next = 0;
+  for (const kdspace::BoxNode& n : tree.nodes()) {
+    if (!n.is_leaf()) continue;
+    REQUIRE(n.first() == next);
+    next += (n.count() + 3) / 4 * 4;
+    for (std::size_t r = n.first() + n.count(); r < next; ++r) REQUIRE(refs[r] == refs[r - 1]);
+  }
+  REQUIRE(next == refs.size());
+  for (std::size_t r = 0; r < refs.size(); ++r)
+    for (int a = 0; a < 3; ++a) {
+      REQUIRE(blocks[r / 4].plane[a][r % 4] == tree.box(refs[r]).lo[a]);
+      REQUIRE(blocks[r / 4].plane[3 + a][r % 4] == tree.box(refs[r]).hi[a]);
+    }
+}
 
 BoxBuildParams with_method(BoxBuildMethod m) {
   BoxBuildParams p;
@@ -49,7 +72,17 @@ TEST_CASE("refit: queries after a refit equal brute force on the moved boxes", "
       const std::vector<Box3f>& boxes = motion.step();
       REQUIRE(tree.refit(boxes.data(), boxes.size()));
       INFO("method " << static_cast<int>(m) << ", frame " << frame);
+      check_layout(tree);
       REQUIRE(kdspace::overlapping_pairs(tree) == kdspace::brute_force_pairs(boxes));
+      // Rays read the refitted leaf blocks: the same hits as a tree built over the moved boxes.
+      const BoxTree built(boxes);
+      for (int r = 0; r < 20; ++r) {
+        const Box3f& target = boxes[static_cast<std::size_t>(r) * 97];
+        const kdspace::Ray ray{{-5.0f, 0.5f * target.lo[1] + 0.5f * target.hi[1], 0.5f * target.lo[2] + 0.5f * target.hi[2]},
+                               {1.0f, 0.01f * static_cast<float>(r - 10), 0.02f}};
+        REQUIRE(tree.closest_hit(ray) == built.closest_hit(ray));
+        REQUIRE(tree.any_hit(ray).hit() == built.any_hit(ray).hit());
+      }
       const Box3f query = boxes[static_cast<std::size_t>(frame) * 7];
       REQUIRE(kdspace::overlapping(tree, query) == kdspace::brute_force_overlapping(boxes, query));
       const auto contact = kdspace::first_contact(tree, query, {0.1f, -0.05f, 0});
@@ -71,7 +104,10 @@ TEST_CASE("refit: refitting the moved boxes only makes the tree of refitting all
     REQUIRE(full.refit(boxes.data(), boxes.size()));
     REQUIRE(partial.nodes() == full.nodes());
     REQUIRE(partial.references() == full.references());
-    REQUIRE(partial.reference_boxes().size() == full.reference_boxes().size());
+    check_layout(partial);
+    REQUIRE(partial.leaf_blocks().size() == full.leaf_blocks().size());
+    REQUIRE(std::memcmp(partial.leaf_blocks().data(), full.leaf_blocks().data(),
+                        full.leaf_blocks().size() * sizeof(LeafBlock)) == 0);
     CHECK(partial.bounds().lo == full.bounds().lo);
     CHECK(partial.bounds().hi == full.bounds().hi);
   }
@@ -84,6 +120,7 @@ TEST_CASE("refit: more boxes, fewer boxes, boxes far outside the old bounds", "[
   boxes.push_back(box_of(-100, -100, -100, -99, -99, -99));
   boxes.push_back(box_of(-99, -99, -99, -98, 50, 50));
   REQUIRE(tree.refit(boxes.data(), boxes.size()));
+  check_layout(tree);
   CHECK(tree.size() == boxes.size());
   CHECK(kdspace::overlapping_pairs(tree) == kdspace::brute_force_pairs(boxes));
   CHECK(tree.bounds().lo[0] == -100);

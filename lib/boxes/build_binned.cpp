@@ -55,14 +55,14 @@ constexpr std::size_t small_node = 128;
 class PlaneBuilder {
  public:
   PlaneBuilder(std::vector<Item>& items, std::size_t leaf_size, std::size_t max_depth,
-               std::vector<BoxNode>& nodes)
+               std::vector<BuiltNode>& nodes)
       : items_(items), leaf_size_(leaf_size), max_depth_(max_depth), nodes_(nodes) {}
 
   std::size_t deepest_leaf = 0;
 
   void build_all(const Box3f& cell) {
     if (items_.empty()) {
-      nodes_.push_back(BoxNode::leaf(0, 0));
+      nodes_.emplace_back();
       return;
     }
     build(0, items_.size(), cell, bounds_of(items_.data(), items_.data() + items_.size()), 0);
@@ -77,17 +77,20 @@ class PlaneBuilder {
     CentreBounds lower_centres, upper_centres;
     if (end - begin <= leaf_size_ || depth >= max_depth_ ||
         !choose(begin, end, cell, centres, axis, plane, middle, lower_centres, upper_centres)) {
-      nodes_.push_back(BoxNode::leaf(0, 0));
+      nodes_.emplace_back();
       deepest_leaf = std::max(deepest_leaf, depth);
       return;
     }
     const std::size_t self = nodes_.size();
-    nodes_.push_back(BoxNode::inner(axis, plane, 0));
+    BuiltNode inner;
+    inner.axis = static_cast<std::int8_t>(axis);
+    inner.split = plane;
+    nodes_.push_back(inner);
     Box3f lower = cell, upper = cell;
     lower.hi[axis] = plane;
     upper.lo[axis] = plane;
     build(begin, middle, lower, lower_centres, depth + 1);
-    nodes_[self] = BoxNode::inner(axis, plane, static_cast<std::uint32_t>(nodes_.size()));
+    nodes_[self].right = static_cast<std::uint32_t>(nodes_.size());
     build(middle, end, upper, upper_centres, depth + 1);
   }
 
@@ -195,7 +198,7 @@ class PlaneBuilder {
   std::vector<Item>& items_;
   std::size_t leaf_size_;
   std::size_t max_depth_;
-  std::vector<BoxNode>& nodes_;
+  std::vector<BuiltNode>& nodes_;
 };
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/error.hpp"
 #include "build_common.hpp"
+#include "layout.hpp"
 #include "route.hpp"
 
 namespace kdspace {
@@ -22,6 +23,18 @@ void include(Box3f& cell, const Box3f& b) {
   }
 }
 
+/// The tree's nodes as a build writes them (leaves left empty, for route_boxes to fill).
+std::vector<detail::BuiltNode> planes_of(const std::vector<BoxNode>& nodes) {
+  std::vector<detail::BuiltNode> built(nodes.size());
+  for (std::size_t i = 0; i < nodes.size(); ++i)
+    if (!nodes[i].is_leaf()) {
+      built[i].axis = static_cast<std::int8_t>(nodes[i].axis());
+      built[i].split = nodes[i].split();
+      built[i].right = nodes[i].right_child();
+    }
+  return built;
+}
+
 double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -33,20 +46,24 @@ bool BoxTree::refit(const Box3f* boxes, std::size_t n) {
   const auto start = std::chrono::steady_clock::now();
   const auto budget =
       static_cast<std::size_t>(static_cast<double>(params_.max_references_per_box) * static_cast<double>(n));
-  if (!detail::route_boxes(nodes_, boxes, n, budget, references_)) return false;
+  detail::TreeWriter routed;
+  routed.nodes = planes_of(nodes_);
+  if (!detail::route_boxes(routed.nodes, boxes, n, budget, routed.references)) return false;
   boxes_.assign(boxes, boxes + n);
   // The root cell keeps the old cells, so that every plane stays strictly inside its cell.
   for (const Box3f& b : boxes_) include(bounds_, b);
-  leaf_boxes_.resize(references_.size());
-  for (std::size_t r = 0; r < references_.size(); ++r) leaf_boxes_[r] = boxes_[references_[r]];
+  detail::TreeLayout layout = detail::lay_out(routed, boxes_);
+  nodes_ = std::move(layout.nodes);
+  references_ = std::move(layout.references);
+  blocks_ = std::move(layout.blocks);
   count_leaves();
   stats_.build_seconds = seconds_since(start);
   return true;
 }
 
-// Only the leaves that a moved box leaves or enters change: the others' references and boxes are
-// copied over in blocks, and only the changed leaves are merged (their unmoved references, in order,
-// with the moved boxes that now reach them).
+// Only the leaves that a moved box leaves or enters change: the others' (padded) references and leaf
+// blocks are copied over in runs, and only the changed leaves are merged (their unmoved references,
+// in order, with the moved boxes that now reach them) and written again (detail::write_leaf).
 bool BoxTree::refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t m) {
   if (m > 0 && (boxes == nullptr || moved == nullptr)) throw Error("refit: null pointer");
   for (std::size_t k = 0; k < m; ++k) {
@@ -85,9 +102,9 @@ bool BoxTree::refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t 
   for (std::size_t k = 0; k < m; ++k) moved_flag[moved[k]] = 1;
   auto is_moved = [&](std::uint32_t box) { return moved_flag[box] != 0; };
 
-  // The new size of every leaf, and so where each one starts.
+  // The new size of every leaf, and so where each one starts (a multiple of 4).
   std::vector<BoxNode> nodes = nodes_;
-  std::size_t total = 0;
+  std::size_t total = 0, padded_total = 0;
   for (std::size_t node = 0; node < nodes.size(); ++node) {
     const BoxNode& at = nodes_[node];
     if (!at.is_leaf()) continue;
@@ -98,21 +115,28 @@ bool BoxTree::refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t 
       for (std::uint32_t r = 0; r < at.count(); ++r) count += is_moved(ref[r]) ? 0 : 1;
     }
     if (total + count > detail::reference_limit) return false;
-    nodes[node] = BoxNode::leaf(static_cast<std::uint32_t>(total), static_cast<std::uint32_t>(count));
+    nodes[node] = BoxNode::leaf(static_cast<std::uint32_t>(padded_total), static_cast<std::uint32_t>(count));
     total += count;
+    padded_total += detail::padded_size(count);
   }
   const double budget =
       static_cast<double>(params_.max_references_per_box) * static_cast<double>(boxes_.size());
   if (static_cast<double>(total) > budget) return false;
 
-  // Runs of unchanged leaves are copied as blocks (they are contiguous in both lists); changed leaves
-  // are merged.
-  std::vector<std::uint32_t> references(total);
-  std::vector<Box3f> leaf_boxes(total);
+  // The boxes take their new places first: the changed leaves' blocks are written from them.
+  for (std::size_t k = 0; k < m; ++k) {
+    boxes_[moved[k]] = boxes[moved[k]];
+    include(bounds_, boxes[moved[k]]);
+  }
+  // Runs of unchanged leaves are copied as they are (they are contiguous in both layouts, references
+  // and blocks alike); changed leaves are merged and written again.
+  std::vector<std::uint32_t> references(padded_total);
+  std::vector<LeafBlock> blocks(padded_total / 4);
+  std::vector<std::uint32_t> merged;
   std::size_t run_old = 0, run_new = 0, run_length = 0;
   auto copy_run = [&] {
     std::copy_n(references_.data() + run_old, run_length, references.data() + run_new);
-    std::copy_n(leaf_boxes_.data() + run_old, run_length, leaf_boxes.data() + run_new);
+    std::copy_n(blocks_.data() + run_old / 4, run_length / 4, blocks.data() + run_new / 4);
     run_length = 0;
   };
   for (std::size_t node = 0; node < nodes.size(); ++node) {
@@ -123,40 +147,32 @@ bool BoxTree::refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t 
         run_old = at.first();
         run_new = nodes[node].first();
       }
-      run_length += at.count();
+      run_length += detail::padded_size(at.count());
       continue;
     }
     copy_run();
-    std::size_t out = nodes[node].first();
+    merged.clear();
     const std::uint32_t *old_ref = references_.data() + at.first(), *old_end = old_ref + at.count();
-    const Box3f* old_box = leaf_boxes_.data() + at.first();
     const std::uint32_t* new_ref = entering.data() + entering_first[node];
     const std::uint32_t* new_end = entering.data() + entering_first[node + 1];
     for (;;) {
-      while (old_ref < old_end && is_moved(*old_ref)) {
-        ++old_ref;
-        ++old_box;
-      }
+      while (old_ref < old_end && is_moved(*old_ref)) ++old_ref;
       const bool old_left = old_ref < old_end, new_left = new_ref < new_end;
       if (!old_left && !new_left) break;
-      if (old_left && (!new_left || *old_ref < *new_ref)) {
-        references[out] = *old_ref++;
-        leaf_boxes[out++] = *old_box++;
-      } else {
-        leaf_boxes[out] = boxes[*new_ref];
-        references[out++] = *new_ref++;
-      }
+      if (old_left && (!new_left || *old_ref < *new_ref))
+        merged.push_back(*old_ref++);
+      else
+        merged.push_back(*new_ref++);
     }
+    const std::uint32_t first = nodes[node].first();
+    detail::write_leaf(merged.data(), static_cast<std::uint32_t>(merged.size()), boxes_.data(),
+                       references.data() + first, blocks.data() + first / 4);
   }
   copy_run();
 
   nodes_.swap(nodes);
   references_.swap(references);
-  leaf_boxes_.swap(leaf_boxes);
-  for (std::size_t k = 0; k < m; ++k) {
-    boxes_[moved[k]] = boxes[moved[k]];
-    include(bounds_, boxes[moved[k]]);
-  }
+  blocks_.swap(blocks);
   count_leaves();
   stats_.build_seconds = seconds_since(start);
   return true;

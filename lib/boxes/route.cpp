@@ -4,7 +4,7 @@
 
 namespace kdspace::detail {
 
-bool route_boxes(std::vector<BoxNode>& nodes, const Box3f* boxes, std::size_t n, std::size_t max_references,
+bool route_boxes(std::vector<BuiltNode>& nodes, const Box3f* boxes, std::size_t n, std::size_t max_references,
                  std::vector<std::uint32_t>& references) {
   // One descent a box, then a counting sort by leaf (stable, so a leaf's ids stay ascending).
   const std::size_t limit = std::min(max_references, reference_limit);
@@ -26,7 +26,8 @@ bool route_boxes(std::vector<BoxNode>& nodes, const Box3f* boxes, std::size_t n,
   for (std::size_t node = 0; node < nodes.size(); ++node) {
     if (!nodes[node].is_leaf()) continue;
     next[node] = first;
-    nodes[node] = BoxNode::leaf(first, count[node]);
+    nodes[node].first = first;
+    nodes[node].count = count[node];
     first += count[node];
   }
   references.resize(leaf_of.size());

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "build_common.hpp"
 #include "kdspace/box.hpp"
 #include "kdspace/boxes/box_tree.hpp"
 
@@ -19,37 +20,45 @@ namespace kdspace::detail {
 /// The most references a tree holds: they are counted in 30 bits (BoxNode).
 inline constexpr std::size_t reference_limit = (std::size_t{1} << 30) - 1;
 
-/// Calls leaf(node) for every leaf of `nodes` that box b goes to.
-template <class Leaf>
-void for_each_leaf_of(const std::vector<BoxNode>& nodes, const Box3f& b, Leaf&& leaf) {
+/// The split of an inner node, read alike from the builds' nodes and the tree's.
+inline int split_axis(const BuiltNode& n) { return n.axis; }
+inline float split_position(const BuiltNode& n) { return n.split; }
+inline std::uint32_t right_child(const BuiltNode& n) { return n.right; }
+inline int split_axis(const BoxNode& n) { return n.axis(); }
+inline float split_position(const BoxNode& n) { return n.split(); }
+inline std::uint32_t right_child(const BoxNode& n) { return n.right_child(); }
+
+/// Calls leaf(node) for every leaf of `nodes` (BuiltNodes or BoxNodes) that box b goes to.
+template <class Node, class Leaf>
+void for_each_leaf_of(const std::vector<Node>& nodes, const Box3f& b, Leaf&& leaf) {
   std::array<std::uint32_t, max_box_tree_depth + 2> stack;
   std::size_t top = 0;
   stack[top++] = 0;
   while (top > 0) {
     std::uint32_t node = stack[--top];
     for (;;) {
-      const BoxNode& at = nodes[node];
+      const Node& at = nodes[node];
       if (at.is_leaf()) {
         leaf(node);
         break;
       }
-      const int axis = at.axis();
-      const float p = at.split();
+      const int axis = split_axis(at);
+      const float p = split_position(at);
       const bool lower = b.lo[axis] < p || b.hi[axis] <= p, upper = b.hi[axis] > p;
       if (lower && upper) {
-        stack[top++] = at.right_child();
+        stack[top++] = right_child(at);
         node = node + 1;
       } else {
-        node = lower ? node + 1 : at.right_child();
+        node = lower ? node + 1 : right_child(at);
       }
     }
   }
 }
 
-/// Fills the leaves of `nodes` (inner nodes as they are, leaves rewritten) with boxes[0 .. n).
-/// Returns false, with nothing changed, when the leaves would hold more than max_references
-/// references.
-bool route_boxes(std::vector<BoxNode>& nodes, const Box3f* boxes, std::size_t n, std::size_t max_references,
+/// Fills the leaves of `nodes` (inner nodes as they are, leaves rewritten) with boxes[0 .. n), their
+/// references unpadded and ascending per leaf (the layout pass pads them). Returns false, with
+/// nothing changed, when the leaves would hold more than max_references references.
+bool route_boxes(std::vector<BuiltNode>& nodes, const Box3f* boxes, std::size_t n, std::size_t max_references,
                  std::vector<std::uint32_t>& references);
 
 }  // namespace kdspace::detail

@@ -96,7 +96,7 @@ Contact first_contact_in(const TreeAccess& tree, const Box3f& moving, const Vec3
       if (tree.is_leaf(node)) {
         const std::uint32_t count = tree.leaf_size(node);
         const std::uint32_t* ids = tree.leaf_ids(node);
-        const Box3f* boxes = tree.leaf_boxes(node);
+        const auto boxes = tree.leaf_boxes(node);
         stats.boxes_tested += count;
         for (std::uint32_t i = 0; i < count; ++i) {
           double t_enter = 0, t_leave = best_t;

@@ -38,11 +38,12 @@ void overlapping_in_leaf(const TreeAccess& tree, NodeId leaf, const Box3f& cell,
                          std::vector<std::uint32_t>& ids, CollideStats& stats) {
   const std::uint32_t count = tree.leaf_size(leaf);
   const std::uint32_t* leaf_ids = tree.leaf_ids(leaf);
-  const Box3f* boxes = tree.leaf_boxes(leaf);
+  const auto boxes = tree.leaf_boxes(leaf);
   stats.boxes_tested += count;
-  for (std::uint32_t i = 0; i < count; ++i)
-    if (query.overlaps(boxes[i]) && owns(cell, boxes[i], pair_point(query, boxes[i])))
-      ids.push_back(leaf_ids[i]);
+  for (std::uint32_t i = 0; i < count; ++i) {
+    const Box3f& b = boxes[i];
+    if (query.overlaps(b) && owns(cell, b, pair_point(query, b))) ids.push_back(leaf_ids[i]);
+  }
 }
 
 /// The rule shared by the pair searches: box b, met in a leaf of cell `cell`, against every box of
@@ -53,12 +54,13 @@ void pair_with_leaf(const Box3f& b, const Box3f& cell, const TreeAccess& tree, N
                     const Box3f& leaf_cell, CollideStats& stats, Emit&& emit) {
   const std::uint32_t count = tree.leaf_size(leaf);
   const std::uint32_t* ids = tree.leaf_ids(leaf);
-  const Box3f* boxes = tree.leaf_boxes(leaf);
+  const auto boxes = tree.leaf_boxes(leaf);
   stats.boxes_tested += count;
   for (std::uint32_t y = 0; y < count; ++y) {
-    if (!b.overlaps(boxes[y])) continue;
-    const auto c = pair_point(b, boxes[y]);
-    if (owns(cell, b, c) && owns(leaf_cell, boxes[y], c)) emit(ids[y]);
+    const Box3f& by = boxes[y];
+    if (!b.overlaps(by)) continue;
+    const auto c = pair_point(b, by);
+    if (owns(cell, b, c) && owns(leaf_cell, by, c)) emit(ids[y]);
   }
 }
 
@@ -99,7 +101,7 @@ void pairs_of_leaf(const TreeAccess& tree, const NodeAndCell& leaf, std::vector<
                    CollideStats& stats) {
   const std::uint32_t count = tree.leaf_size(leaf.node);
   const std::uint32_t* ids = tree.leaf_ids(leaf.node);
-  const Box3f* boxes = tree.leaf_boxes(leaf.node);
+  const auto boxes = tree.leaf_boxes(leaf.node);
   const Box3f& cell = leaf.cell;
   for (std::uint32_t x = 0; x < count; ++x) {
     const Box3f& bx = boxes[x];
@@ -130,10 +132,11 @@ void pairs_of_leaf_pair(const TreeAccess& ta, const NodeAndCell& a, const TreeAc
                         const NodeAndCell& b, std::vector<IndexPair>& out, CollideStats& stats) {
   const std::uint32_t count = ta.leaf_size(a.node);
   const std::uint32_t* ids = ta.leaf_ids(a.node);
-  const Box3f* boxes = ta.leaf_boxes(a.node);
+  const auto boxes = ta.leaf_boxes(a.node);
   for (std::uint32_t x = 0; x < count; ++x) {
-    if (!boxes[x].overlaps(b.cell)) continue;
-    pair_with_leaf(boxes[x], a.cell, tb, b.node, b.cell, stats, [&](std::uint32_t id) {
+    const Box3f& bx = boxes[x];
+    if (!bx.overlaps(b.cell)) continue;
+    pair_with_leaf(bx, a.cell, tb, b.node, b.cell, stats, [&](std::uint32_t id) {
       out.push_back({ids[x], id});
     });
   }

@@ -1,6 +1,8 @@
 // How the collision queries see a BoxTree. This is the one file of lib/collide/ that knows the tree's
 // layout (its nodes, the references of a leaf and the boxes of those references, through BoxTree's
 // const accessors), so that a change of layout is followed here and nowhere else in lib/collide/.
+// A leaf's boxes are read from the tree's leaf blocks (per coordinate, four boxes a block, in leaf
+// order), not through box(id): KDSPACE_LEAF_BOXES_FROM picks the other for measurement.
 //
 // It also holds the cells of the nodes and the ownership rule that lets every overlapping pair be
 // reported once although a box may be referenced by several leaves (see `owns`).
@@ -16,12 +18,46 @@ namespace kdspace::detail {
 
 using NodeId = std::uint32_t;
 
+/// The boxes of one leaf, leaf_boxes[i] for i in [0, count): from the leaf blocks, where the slot of
+/// the leaf's i-th reference is first + i.
+class LeafBlockBoxes {
+ public:
+  LeafBlockBoxes(const LeafBlock* blocks, std::uint32_t first) : blocks_(blocks), first_(first) {}
+  Box3f operator[](std::uint32_t i) const {
+    const std::uint32_t r = first_ + i;
+    const LeafBlock& block = blocks_[r / 4];
+    const std::uint32_t lane = r % 4;
+    Box3f b;
+    for (int a = 0; a < 3; ++a) {
+      b.lo[a] = block.plane[a][lane];
+      b.hi[a] = block.plane[3 + a][lane];
+    }
+    return b;
+  }
+
+ private:
+  const LeafBlock* blocks_;
+  std::uint32_t first_;
+};
+
+/// The same boxes read through the leaf's ids from the tree's boxes (one indirection a box).
+class IndexedBoxes {
+ public:
+  IndexedBoxes(const Box3f* boxes, const std::uint32_t* ids) : boxes_(boxes), ids_(ids) {}
+  const Box3f& operator[](std::uint32_t i) const { return boxes_[ids_[i]]; }
+
+ private:
+  const Box3f* boxes_;
+  const std::uint32_t* ids_;
+};
+
 class TreeAccess {
  public:
   explicit TreeAccess(const BoxTree& tree)
       : nodes_(tree.nodes().data()),
         ids_(tree.references().data()),
-        boxes_(tree.reference_boxes().data()),
+        blocks_(tree.leaf_blocks().data()),
+        boxes_(tree.size() > 0 ? &tree.box(0) : nullptr),
         root_cell_(tree.bounds()),
         node_count_(static_cast<NodeId>(tree.node_count())),
         empty_(tree.size() == 0) {}
@@ -40,10 +76,14 @@ class TreeAccess {
   NodeId left(NodeId n) const { return n + 1; }
   NodeId right(NodeId n) const { return nodes_[n].right_child(); }
 
-  /// A leaf's references: leaf_size boxes, their ids ascending, their boxes side by side.
+  /// A leaf's references: leaf_size boxes, their ids ascending, leaf_boxes(n)[i] the box of the i-th.
   std::uint32_t leaf_size(NodeId n) const { return nodes_[n].count(); }
   const std::uint32_t* leaf_ids(NodeId n) const { return ids_ + nodes_[n].first(); }
-  const Box3f* leaf_boxes(NodeId n) const { return boxes_ + nodes_[n].first(); }
+#ifdef KDSPACE_LEAF_BOXES_FROM_IDS
+  IndexedBoxes leaf_boxes(NodeId n) const { return IndexedBoxes(boxes_, leaf_ids(n)); }
+#else
+  LeafBlockBoxes leaf_boxes(NodeId n) const { return LeafBlockBoxes(blocks_, nodes_[n].first()); }
+#endif
 
   /// Orders the leaves left to right: of two leaves, the one in the left subtree of their lowest
   /// common ancestor has the smaller rank. Nodes are stored depth first, left subtree first, so the
@@ -53,6 +93,7 @@ class TreeAccess {
  private:
   const BoxNode* nodes_;
   const std::uint32_t* ids_;
+  const LeafBlock* blocks_;
   const Box3f* boxes_;
   Box3f root_cell_;
   NodeId node_count_;

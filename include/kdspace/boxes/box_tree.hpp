@@ -198,6 +198,8 @@ class BoxTree {
   const std::uint32_t* leaf_references(const BoxNode& leaf) const {
     return references_.data() + leaf.first();
   }
+  /// The leaves' boxes, four to a block: leaf_blocks()[r / 4] holds box(references()[r]) in lane r % 4.
+  const std::vector<LeafBlock>& leaf_blocks() const { return blocks_; }
   /// Bytes held: the boxes (24 each), the nodes (8 each), the references (4 each) and the leaf blocks
   /// (96 bytes per 4 references: a copy of each leaf's boxes, tested without an indirection).
   std::size_t memory_bytes() const {
