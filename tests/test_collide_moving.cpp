@@ -78,8 +78,8 @@ TEST_CASE("refit: queries after a refit equal brute force on the moved boxes", "
       const BoxTree built(boxes);
       for (int r = 0; r < 20; ++r) {
         const Box3f& target = boxes[static_cast<std::size_t>(r) * 97];
-        const kdspace::Ray ray{{-5.0f, 0.5f * target.lo[1] + 0.5f * target.hi[1], 0.5f * target.lo[2] + 0.5f * target.hi[2]},
-                               {1.0f, 0.01f * static_cast<float>(r - 10), 0.02f}};
+        const float y = 0.5f * target.lo[1] + 0.5f * target.hi[1], z = 0.5f * target.lo[2] + 0.5f * target.hi[2];
+        const kdspace::Ray ray{{-5.0f, y, z}, {1.0f, 0.01f * static_cast<float>(r - 10), 0.02f}};
         REQUIRE(tree.closest_hit(ray) == built.closest_hit(ray));
         REQUIRE(tree.any_hit(ray).hit() == built.any_hit(ray).hit());
       }

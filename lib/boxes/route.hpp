@@ -11,9 +11,9 @@
 #include <cstdint>
 #include <vector>
 
-#include "build_common.hpp"
 #include "kdspace/box.hpp"
 #include "kdspace/boxes/box_tree.hpp"
+#include "build_common.hpp"
 
 namespace kdspace::detail {
 
