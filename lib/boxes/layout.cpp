@@ -23,6 +23,12 @@ void write_leaf(const std::uint32_t* ids, std::uint32_t count, const Box3f* boxe
 
 TreeLayout lay_out(const TreeWriter& built, const std::vector<Box3f>& boxes) {
   TreeLayout out;
+  lay_out(built, boxes, out);
+  return out;
+}
+
+void lay_out(const TreeWriter& built, const std::vector<Box3f>& boxes, TreeLayout& out) {
+  out.nodes.clear();
   out.nodes.reserve(built.nodes.size());
   std::size_t padded = 0;
   for (const BuiltNode& n : built.nodes)
@@ -40,7 +46,6 @@ TreeLayout lay_out(const TreeWriter& built, const std::vector<Box3f>& boxes) {
     out.nodes.push_back(BoxNode::leaf(first, n.count));
     first += static_cast<std::uint32_t>(padded_size(n.count));
   }
-  return out;
 }
 
 }  // namespace kdspace::detail

@@ -20,6 +20,8 @@ struct TreeLayout {
 
 /// The traversal layout of `built`, a tree over `boxes`.
 TreeLayout lay_out(const TreeWriter& built, const std::vector<Box3f>& boxes);
+/// The same into `out`, reusing its vectors' memory (BoxTree::refit, frame after frame).
+void lay_out(const TreeWriter& built, const std::vector<Box3f>& boxes, TreeLayout& out);
 
 /// Reference slots a leaf of `count` boxes takes: count rounded up to a multiple of 4.
 inline std::size_t padded_size(std::size_t count) { return (count + 3) / 4 * 4; }

@@ -52,7 +52,9 @@ bool BoxTree::refit(const Box3f* boxes, std::size_t n) {
   boxes_.assign(boxes, boxes + n);
   // The root cell keeps the old cells, so that every plane stays strictly inside its cell.
   for (const Box3f& b : boxes_) include(bounds_, b);
-  detail::TreeLayout layout = detail::lay_out(routed, boxes_);
+  // Laid out into the tree's own vectors: a refit every frame allocates no new leaf storage.
+  detail::TreeLayout layout{std::move(nodes_), std::move(references_), std::move(blocks_)};
+  detail::lay_out(routed, boxes_, layout);
   nodes_ = std::move(layout.nodes);
   references_ = std::move(layout.references);
   blocks_ = std::move(layout.blocks);

@@ -97,11 +97,14 @@ bool beyond_region(const Box3f& box, const Box3f& cell, const Box3f& root, Box3f
 /// with it (a pair of boxes that only touch, in a plane that one of them ends on). A pair whose
 /// owning leaves differ is found from the box in the leaf of smaller rank (the box that ends on the
 /// plane of their lowest common ancestor), so it is found once.
+/// `boxes` is scratch: the leaf's boxes are read out of its blocks once, for the all-against-all loop.
 void pairs_of_leaf(const TreeAccess& tree, const NodeAndCell& leaf, std::vector<IndexPair>& out,
-                   CollideStats& stats) {
+                   std::vector<Box3f>& boxes, CollideStats& stats) {
   const std::uint32_t count = tree.leaf_size(leaf.node);
   const std::uint32_t* ids = tree.leaf_ids(leaf.node);
-  const auto boxes = tree.leaf_boxes(leaf.node);
+  const auto leaf_boxes = tree.leaf_boxes(leaf.node);
+  boxes.resize(count);
+  for (std::uint32_t i = 0; i < count; ++i) boxes[i] = leaf_boxes[i];
   const Box3f& cell = leaf.cell;
   for (std::uint32_t x = 0; x < count; ++x) {
     const Box3f& bx = boxes[x];
@@ -203,11 +206,12 @@ std::vector<IndexPair> overlapping_pairs(const BoxTree& tree, unsigned threads, 
   const unsigned workers = detail::resolve_threads(threads);
   std::vector<std::vector<IndexPair>> found(workers);
   std::vector<CollideStats> per_worker(workers);
+  std::vector<std::vector<Box3f>> scratch(workers);
   constexpr std::size_t leaves_per_chunk = 64;
   detail::parallel_for(leaves.size(), workers, leaves_per_chunk,
                        [&](std::size_t begin, std::size_t end, unsigned worker) {
                          for (std::size_t l = begin; l < end; ++l)
-                           pairs_of_leaf(access, leaves[l], found[worker], per_worker[worker]);
+                           pairs_of_leaf(access, leaves[l], found[worker], scratch[worker], per_worker[worker]);
                        });
   if (stats) {
     ++stats->queries;
