@@ -1,34 +1,67 @@
-// kdspace-bench: the point workloads of kdspace side by side with FLANN (KDTreeSingleIndex, leaf 10)
-// and nanoflann (KDTreeSingleIndexAdaptor, leaf 10, run-time and compile-time dimension), on
-// identical data, in one process.
+// kdspace-bench: the point workloads of kdspace side by side with FLANN (KDTreeSingleIndex, leaf 10),
+// nanoflann (KDTreeSingleIndexAdaptor, leaf 10, run-time and compile-time dimension), CGAL's Kd_tree
+// (3-D) and FAISS's IndexFlatL2 (a BLAS scan, from 32-D on) on identical data, in one process; with
+// --python-peers, pykdtree and SciPy's cKDTree in a separate process (bench/python_peers.py).
+//
+// Data: synthetic (uniform and Gaussian blobs, 3-D to 128-D), MFCC frames of synthetic audio (13-D,
+// 20-D), real 3-D scans and meshes (--real DIR, from bench/real_data/fetch.sh DIR: a random tenth of
+// each set's points held out as the queries), dense SIFT-like descriptors of photographs (--images
+// DIR: 128-D), and file pairs (--fvecs/--bvecs).
 //
 // For each workload every library builds its index and answers the same queries: exact 1-NN and
-// 10-NN (one thread), radius search at two radii (mean count ~10 and ~100), box search (kdspace only:
-// neither peer has one; a plain scan is the reference), approximate 10-NN at eps 0.5 and 2 (recall@10
-// against the exact answers), and batched exact 10-NN on 1 and 2 threads. Repetitions are interleaved
-// across libraries (repetition loop outside, libraries inside) so that a drift in machine speed hits
-// all alike; the median over repetitions is reported. Every exact answer is cross-checked (10-NN and
-// 1-NN distances at every rank within 1e-5 relative; radius counts equal; box index lists equal) and
-// kdspace's own 10-NN answers are checked against brute force on a sample; any disagreement makes the
-// exit status 1.
+// 10-NN (one thread), radius search at two radii (mean count ~10 and ~100), box search (kdspace and
+// CGAL; a plain scan is the reference), approximate 10-NN at eps 0.5 and 2 (recall@10 against the
+// exact answers), and batched exact 10-NN on 1 and 2 threads. Repetitions are interleaved across
+// libraries (repetition loop outside, libraries inside) so that a drift in machine speed hits all
+// alike; within a repetition an operation repeats until it has run --min-time seconds (the small real
+// sets answer all their queries in a millisecond), and the median over repetitions is reported. Every
+// exact answer is cross-checked (10-NN and 1-NN distances at every rank within 1e-5 relative; radius
+// counts equal; box counts and index lists equal) and kdspace's own 10-NN answers are checked against
+// brute force on a sample; any disagreement makes the exit status 1 (FAISS's flat index is not exact
+// by design: its disagreements are reported, not failed).
 //
-// usage: kdspace-bench [--workload NAME]... [--quick] [--reps R] [--queries Q]
+// usage: kdspace-bench [--workload NAME]... [--quick] [--reps R] [--queries Q] [--min-time S]
+//                      [--real DIR] [--images DIR] [--python-peers SCRIPT]
 //                      [--fvecs BASE QUERIES]... [--bvecs BASE QUERIES]... [--list]
-//   --workload NAME   run this workload (repeatable); default: all built-in ones, or only the files
-//                     when --fvecs/--bvecs are given
+//   --workload NAME   run this workload (repeatable); default: all built-in ones plus the real and
+//                     image sets when their folders are given, or only the files when --fvecs/--bvecs
+//                     are given
 //   --quick           n and queries / 10, one repetition (for development)
 //   --reps R          repetitions (default 3; 1 with --quick)
 //   --queries Q       at most Q queries per workload
+//   --min-time S      seconds each measurement runs at least (default 0.1)
+//   --clock wall|cpu  wall time (default), or the process's CPU time, which other work on a busy
+//                     machine does not inflate (no 2-thread figures then)
+//   --real DIR        the real scans and meshes listed in DIR/real_data.txt (bench/real_data/fetch.sh)
+//   --images DIR      the photographs for the images128d set (bench/run_all.sh fetches them)
+//   --python-peers SCRIPT  run SCRIPT (bench/python_peers.py) with /usr/bin/python3 on every workload
 //   --fvecs/--bvecs   a base and a query file (read with kdspace::io::read_points; the extension picks
 //                     the format); the workload is named after the base file
 //
 // Output: per workload a markdown table (rows: libraries; columns: measurements; last row: kdspace ÷
-// best peer), then one JSON line per measurement ({"bench":"points",...}). Progress goes to stderr.
+// best peer), then one JSON line per measurement ({"bench":"points",...}; the Python peers print
+// {"bench":"points-python",...}). Progress goes to stderr.
+#include <dlfcn.h>
 #include <flann/flann.hpp>
 #include <nanoflann.hpp>
+#ifdef KDSPACE_BENCH_CGAL
+#include <CGAL/Fuzzy_iso_box.h>
+#include <CGAL/Fuzzy_sphere.h>
+#include <CGAL/Kd_tree.h>
+#include <CGAL/Orthogonal_k_neighbor_search.h>
+#include <CGAL/Search_traits_3.h>
+#include <CGAL/Simple_cartesian.h>
+#endif
+#ifdef KDSPACE_BENCH_FAISS
+#include <faiss/IndexFlat.h>
+#endif
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -36,6 +69,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <ctime>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -45,15 +79,68 @@
 #include <utility>
 #include <vector>
 
+#include "synthetic_audio.hpp"
+#include "image_features.hpp"
 #include "kdspace/io/vectors.hpp"
 #include "kdspace/kdspace.hpp"
+#include "real_data/mesh_io.hpp"
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
+// The clock of every measurement: wall time (steady_clock), or with --clock cpu the CPU time of the
+// whole process (every thread of every library counted), which a machine busy with other work
+// cannot inflate by taking the processor away; the 2-thread measurements need the wall clock and are
+// left out then.
+bool g_cpu_clock = false;
 
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+double clock_now() {
+  if (g_cpu_clock) {
+    timespec t;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+  }
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+double seconds_since(double start) { return clock_now() - start; }
 double dbl(std::size_t x) { return static_cast<double>(x); }
+
+// A measurement repeats its operation until the repetitions add up to this many seconds, and
+// reports the mean time of one: the real scans answer all their held-out queries in about a
+// millisecond, too short for one reading of the clock. --min-time sets it.
+double g_min_seconds = 0.1;
+
+// Calls `pass` (one pass of an operation: its seconds, or a negative number when the library has
+// no such operation) until the passes add up to g_min_seconds; returns the mean seconds of a pass.
+template <class Pass>
+double timed(Pass&& pass) {
+  double total = 0;
+  std::size_t passes = 0;
+  do {
+    const double s = pass();
+    if (s < 0) return s;
+    total += s;
+    ++passes;
+  } while (total < g_min_seconds);
+  return total / dbl(passes);
+}
+
+// The thread counts of OpenMP (FLANN's and FAISS's loops) and of OpenBLAS (FAISS's sgemm). OpenBLAS
+// is looked up at run time, so that the bench runs with whichever BLAS libblas.so.3 is.
+void set_threads(unsigned threads) {
+#ifdef _OPENMP
+  omp_set_num_threads(static_cast<int>(threads));
+#endif
+  using SetThreads = void (*)(int);
+  static const auto openblas = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+  if (openblas) openblas(static_cast<int>(threads));
+}
+
+std::string blas_name() {
+  using GetConfig = char* (*)();
+  const auto config = reinterpret_cast<GetConfig>(dlsym(RTLD_DEFAULT, "openblas_get_config"));
+  return config ? std::string("OpenBLAS (") + config() + ")" : "a BLAS other than OpenBLAS";
+}
 
 // ---- workloads ------------------------------------------------------------------------------------
 
@@ -72,6 +159,8 @@ const WorkloadSpec kWorkloads[] = {
     {"clustered16d", "clustered", 100000, 16, 20000},  {"uniform16d", "uniform", 100000, 16, 1000},
     {"clustered64d", "clustered", 100000, 64, 2000},   {"uniform64d", "uniform", 100000, 64, 200},
     {"clustered128d", "clustered", 100000, 128, 2000},
+    // MFCC frames of synthetic audio (synthetic_audio.hpp): the 13 or 20 static cepstral coefficients.
+    {"mfcc13", "mfcc", 100000, 13, 20000},             {"mfcc20", "mfcc", 100000, 20, 20000},
 };
 
 // Uniform points in [0, 1)^dim, or Gaussian blobs: 64 centres uniform in [0, 1)^dim (the same for base
@@ -187,6 +276,9 @@ class Library {
   /// Exact k-NN of all queries, batched over `threads` threads.
   virtual double knn_threads(std::size_t /*k*/, unsigned /*threads*/, KnnAnswers& /*out*/) { return -1; }
   virtual bool is_peer() const { return !is_kdspace; }
+  /// Whether its k-NN answers are exact (FAISS's flat index is not: see FaissFlatLibrary). The
+  /// answers of an inexact library are compared and reported, but do not fail the run.
+  virtual bool exact_answers() const { return true; }
 
   const std::string key, label;
   const bool is_kdspace;
@@ -211,7 +303,7 @@ class KdspaceLibrary : public Library {
       : Library(problem, std::move(library_key), std::move(library_label), true) {}
 
   double build() override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     tree_ = std::make_unique<Tree>(p.base.data(), p.n, p.dim);  // default BuildParams: leaf 16, 1 thread
     return seconds_since(start);
   }
@@ -221,7 +313,7 @@ class KdspaceLibrary : public Library {
   double knn(std::size_t k, double eps, KnnAnswers& out) override {
     kdspace::SearchParams params;
     params.eps = eps;
-    const auto start = Clock::now();
+    const double start = clock_now();
     const auto lists = tree_->knn_batch(p.queries.data(), p.nq, k, params, 1);
     const double s = seconds_since(start);
     copy(lists, k, out);
@@ -230,7 +322,7 @@ class KdspaceLibrary : public Library {
 
   double knn_loop(std::size_t k, KnnAnswers& out) override {
     out.reset(p.nq, k);
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t q = 0; q < p.nq; ++q) {
       const auto found = tree_->knn(p.queries.data() + q * p.dim, k);
       for (std::size_t j = 0; j < k; ++j) out.ids[q * k + j] = found[j].index, out.dists[q * k + j] = found[j].distance;
@@ -239,7 +331,7 @@ class KdspaceLibrary : public Library {
   }
 
   double radius(float r, std::vector<std::uint32_t>& counts) override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     const auto lists = tree_->radius_batch(p.queries.data(), p.nq, r, std::numeric_limits<std::size_t>::max(), 1);
     const double s = seconds_since(start);
     counts.resize(p.nq);
@@ -250,7 +342,7 @@ class KdspaceLibrary : public Library {
   double box(BoxAnswers& out) override {
     out.counts.assign(p.nq, 0);
     out.lists.assign(p.scan_boxes, {});
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t b = 0; b < p.nq; ++b) {
       auto found = tree_->box(p.box_lo.data() + b * p.dim, p.box_hi.data() + b * p.dim);
       out.counts[b] = static_cast<std::uint32_t>(found.size());
@@ -260,7 +352,7 @@ class KdspaceLibrary : public Library {
   }
 
   double knn_threads(std::size_t k, unsigned threads, KnnAnswers& out) override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     const auto lists = tree_->knn_batch(p.queries.data(), p.nq, k, {}, threads);
     const double s = seconds_since(start);
     copy(lists, k, out);
@@ -281,7 +373,7 @@ class FlannLibrary : public Library {
 
   double build() override {
     flann::Matrix<float> data(const_cast<float*>(p.base.data()), p.n, p.dim);
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_ = std::make_unique<Index>(data, flann::KDTreeSingleIndexParams(10));  // reorder = true: copies the points
     index_->buildIndex();
     return seconds_since(start);
@@ -312,7 +404,7 @@ class FlannLibrary : public Library {
     flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0.0f, true);  // sorted, like the others
     params.cores = 1;
     params.max_neighbors = -1;
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_->radiusSearch(q, ids, dists, r * r, params);
     const double s = seconds_since(start);
     counts.resize(p.nq);
@@ -332,7 +424,7 @@ class FlannLibrary : public Library {
     // FLANN applies eps to squared distances: a result within (1 + eps) of the true squared distance.
     flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, static_cast<float>(eps), true);
     params.cores = static_cast<int>(threads);
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_->knnSearch(q, id_matrix, dist_matrix, k, params);
     const double s = seconds_since(start);
     for (std::size_t i = 0; i < p.nq * k; ++i) {
@@ -362,7 +454,7 @@ class NanoflannLibrary : public Library {
         cloud_{problem.base.data(), problem.n, problem.dim} {}
 
   double build() override {
-    const auto start = Clock::now();
+    const double start = clock_now();
     index_ = std::make_unique<Index>(static_cast<int>(p.dim), cloud_, nanoflann::KDTreeSingleIndexAdaptorParams(10));
     return seconds_since(start);
   }
@@ -374,7 +466,7 @@ class NanoflannLibrary : public Library {
   double knn(std::size_t k, double eps, KnnAnswers& out) override {
     out.reset(p.nq, k);
     const nanoflann::SearchParams params(32, static_cast<float>(eps));
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t q = 0; q < p.nq; ++q) {
       nanoflann::KNNResultSet<float, std::uint32_t> results(k);
       results.init(out.ids.data() + q * k, out.dists.data() + q * k);
@@ -392,7 +484,7 @@ class NanoflannLibrary : public Library {
     std::vector<std::pair<std::uint32_t, float>> found;
     const nanoflann::SearchParams params(32, 0.f, true);  // sorted, like the others
     const float r2 = r * r;
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t q = 0; q < p.nq; ++q)
       counts[q] = static_cast<std::uint32_t>(index_->radiusSearch(p.queries.data() + q * p.dim, r2, found, params));
     return seconds_since(start);
@@ -414,7 +506,7 @@ class ScanLibrary : public Library {
     out.counts.assign(p.scan_boxes, 0);
     out.lists.assign(p.scan_boxes, {});
     const std::size_t d = p.dim;
-    const auto start = Clock::now();
+    const double start = clock_now();
     for (std::size_t b = 0; b < p.scan_boxes; ++b) {
       const float* lo = p.box_lo.data() + b * d;
       const float* hi = p.box_hi.data() + b * d;
@@ -430,6 +522,133 @@ class ScanLibrary : public Library {
     return seconds_since(start);
   }
 };
+
+#ifdef KDSPACE_BENCH_CGAL
+// CGAL's Kd_tree (Search_traits_3 over float points: 3-D only), with its default splitter (sliding
+// midpoint, buckets of 10 points). The tree copies the points; the conversion of the rows to CGAL
+// points happens before the clock starts, as nanoflann's adaptor does without a copy.
+class CgalLibrary : public Library {
+ public:
+  explicit CgalLibrary(const Problem& problem)
+      : Library(problem, "cgal", "CGAL Kd_tree (sliding midpoint, bucket 10)", false) {
+    for (std::size_t i = 0; i < p.n; ++i) points_.push_back(point(p.base.data() + i * 3));
+  }
+
+  double build() override {
+    const double start = clock_now();
+    tree_ = std::make_unique<Tree>(points_.begin(), points_.end());
+    tree_->build();  // CGAL builds lazily on the first query otherwise
+    return seconds_since(start);
+  }
+  void release() override { tree_.reset(); }
+
+  // Orthogonal_k_neighbor_search reports squared distances (Euclidean_distance's transformed ones).
+  double knn(std::size_t k, double eps, KnnAnswers& out) override {
+    if (eps != 0) return -1;
+    out.reset(p.nq, k);
+    const double start = clock_now();
+    for (std::size_t q = 0; q < p.nq; ++q) {
+      Search search(*tree_, point(p.queries.data() + q * 3), static_cast<unsigned>(k));
+      std::size_t j = 0;
+      for (auto it = search.begin(); it != search.end() && j < k; ++it, ++j) out.dists[q * k + j] = it->second;
+    }
+    const double s = seconds_since(start);
+    for (auto& d : out.dists) d = std::sqrt(d);
+    return s;
+  }
+
+  // Fuzzy_sphere with fuzziness 0 keeps the points at distance <= r; counted, not stored.
+  double radius(float r, std::vector<std::uint32_t>& counts) override {
+    counts.assign(p.nq, 0);
+    const double start = clock_now();
+    for (std::size_t q = 0; q < p.nq; ++q)
+      tree_->search(Counter{&counts[q]}, CGAL::Fuzzy_sphere<Traits>(point(p.queries.data() + q * 3), r, 0.f));
+    return seconds_since(start);
+  }
+
+  // Fuzzy_iso_box with fuzziness 0: the closed box. Counts only (CGAL's points carry no index).
+  double box(BoxAnswers& out) override {
+    out.counts.assign(p.nq, 0);
+    out.lists.clear();
+    const double start = clock_now();
+    for (std::size_t b = 0; b < p.nq; ++b)
+      tree_->search(Counter{&out.counts[b]}, CGAL::Fuzzy_iso_box<Traits>(point(p.box_lo.data() + b * 3),
+                                                                         point(p.box_hi.data() + b * 3), 0.f));
+    return seconds_since(start);
+  }
+
+ private:
+  using Kernel = CGAL::Simple_cartesian<float>;
+  using Traits = CGAL::Search_traits_3<Kernel>;
+  using Search = CGAL::Orthogonal_k_neighbor_search<Traits>;
+  using Tree = Search::Tree;
+
+  /// An output iterator that only counts what is written to it.
+  struct Counter {
+    using iterator_category = std::output_iterator_tag;
+    using value_type = void;
+    using difference_type = std::ptrdiff_t;
+    using pointer = void;
+    using reference = void;
+    std::uint32_t* count;
+    Counter& operator*() { return *this; }
+    Counter& operator++() { return *this; }
+    Counter operator++(int) { return *this; }
+    template <class V>
+    Counter& operator=(const V&) {
+      ++*count;
+      return *this;
+    }
+  };
+
+  static Kernel::Point_3 point(const float* x) { return Kernel::Point_3(x[0], x[1], x[2]); }
+
+  std::vector<Kernel::Point_3> points_;
+  std::unique_ptr<Tree> tree_;
+};
+#endif
+
+#ifdef KDSPACE_BENCH_FAISS
+// FAISS's IndexFlatL2: exact k-NN by scanning, |x|^2 + |q|^2 - 2 x.q with the dot products from BLAS
+// sgemm (OpenBLAS where installed). Its distances come from that formula in float, so they are not
+// exact (cancellation): its answers are reported against the exact ones but do not fail the run.
+// One thread: OpenMP and OpenBLAS are both set to the thread count of the call.
+class FaissFlatLibrary : public Library {
+ public:
+  explicit FaissFlatLibrary(const Problem& problem) : Library(problem, "faiss-flat", "FAISS IndexFlatL2 (BLAS scan)", false) {}
+  bool exact_answers() const override { return false; }
+
+  // A flat index only copies the points: no build time or index size to compare with a tree's, so
+  // none is reported (negative).
+  double build() override {
+    index_ = std::make_unique<faiss::IndexFlatL2>(static_cast<faiss::Index::idx_t>(p.dim));
+    index_->add(static_cast<faiss::Index::idx_t>(p.n), p.base.data());
+    return -1;
+  }
+  void release() override { index_.reset(); }
+
+  double knn(std::size_t k, double eps, KnnAnswers& out) override { return eps == 0 ? search(k, 1, out) : -1; }
+  double knn_threads(std::size_t k, unsigned threads, KnnAnswers& out) override { return search(k, threads, out); }
+
+ private:
+  double search(std::size_t k, unsigned threads, KnnAnswers& out) {
+    set_threads(threads);
+    std::vector<faiss::Index::idx_t> ids(p.nq * k);
+    out.reset(p.nq, k);
+    const double start = clock_now();
+    index_->search(static_cast<faiss::Index::idx_t>(p.nq), p.queries.data(), static_cast<faiss::Index::idx_t>(k),
+                   out.dists.data(), ids.data());
+    const double s = seconds_since(start);
+    set_threads(1);
+    for (std::size_t i = 0; i < p.nq * k; ++i) {
+      out.ids[i] = static_cast<std::uint32_t>(ids[i]);
+      out.dists[i] = std::sqrt(std::max(out.dists[i], 0.f));
+    }
+    return s;
+  }
+  std::unique_ptr<faiss::IndexFlatL2> index_;
+};
+#endif
 
 // ---- setting a workload up ------------------------------------------------------------------------
 
@@ -545,7 +764,7 @@ void note_disagreements(Library& lib, Op op, std::size_t bad) { lib.disagreement
 
 void run_library(const Problem& p, Library& lib, References& refs, bool first_rep) {
   std::fprintf(stderr, "  %s\n", lib.label.c_str());
-  if (const double s = lib.build(); s >= 0) {  // the plain scan has no index
+  if (const double s = timed([&] { return lib.build(); }); s >= 0) {  // the plain scan has no index
     record(lib, kBuild, s, p.n);
     const double bytes = lib.index_bytes();
     lib.bytes_per_point = bytes < 0 ? -1 : bytes / dbl(p.n);
@@ -554,7 +773,7 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
   const std::size_t ks[2] = {1, 10};
   for (int i = 0; i < 2; ++i) {
     const Op op = i == 0 ? kKnn1 : kKnn10;
-    const double s = lib.knn(ks[i], 0.0, answers);
+    const double s = timed([&] { return lib.knn(ks[i], 0.0, answers); });
     if (s < 0) continue;
     record(lib, op, s, p.nq);
     if (!refs.knn[i]) refs.knn[i] = answers;
@@ -564,7 +783,7 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
     check_against_brute_force(p, *refs.knn[1], *refs.knn[0], refs);
   for (int i = 0; i < 2; ++i) {
     const Op op = i == 0 ? kKnn1Loop : kKnn10Loop;
-    const double s = lib.knn_loop(ks[i], answers);
+    const double s = timed([&] { return lib.knn_loop(ks[i], answers); });
     if (s < 0) continue;
     record(lib, op, s, p.nq);
     note_disagreements(lib, op, knn_disagreements(answers, *refs.knn[i]));
@@ -572,7 +791,7 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
   std::vector<std::uint32_t> counts;
   for (int i = 0; i < 2; ++i) {
     const Op op = i == 0 ? kRadius10 : kRadius100;
-    const double s = lib.radius(p.radius[i], counts);
+    const double s = timed([&] { return lib.radius(p.radius[i], counts); });
     if (s < 0) continue;
     record(lib, op, s, p.nq);
     if (!refs.radius[i]) {
@@ -587,7 +806,7 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
     }
   }
   BoxAnswers boxes;
-  if (const double s = lib.box(boxes); s >= 0) {
+  if (const double s = timed([&] { return lib.box(boxes); }); s >= 0) {
     record(lib, kBox, s, boxes.counts.size());
     if (!refs.box) {
       refs.box = boxes;
@@ -600,12 +819,13 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
   }
   for (int i = 0; i < 2; ++i) {
     const Op op = i == 0 ? kApprox05 : kApprox2;
-    const double s = lib.knn(10, kApproxEps[i], answers);
+    const double s = timed([&] { return lib.knn(10, kApproxEps[i], answers); });
     if (s < 0) continue;
     record(lib, op, s, p.nq);
     lib.recall[i] = recall_at_10(answers, *refs.knn[1]);
   }
-  if (const double s = lib.knn_threads(10, 2, answers); s >= 0) {
+  if (g_cpu_clock) {  // CPU time adds up both threads: no 2-thread figure
+  } else if (const double s = timed([&] { return lib.knn_threads(10, 2, answers); }); s >= 0) {
     record(lib, kBatch2, s, p.nq);
     note_disagreements(lib, kBatch2, knn_disagreements(answers, *refs.knn[1]));
   }
@@ -718,12 +938,18 @@ void print_table(const Problem& p, const std::vector<std::unique_ptr<Library>>& 
               "%zu queries; radii calibrated on 256 other queries from kdspace's exact 80-NN / 800-NN distances)\n",
               static_cast<double>(p.radius[0]), refs.mean_count[0], static_cast<double>(p.radius[1]), refs.mean_count[1], p.nq);
   std::printf("- box: cubes of half-width %.6g centred on the queries, mean count %.2f (calibrated like the radii, on "
-              "L∞ distances); kdspace answers all %zu, the plain scan the first %zu; FLANN and nanoflann have no box "
-              "search\n",
+              "L∞ distances); kdspace answers all %zu, the plain scan the first %zu, CGAL all (3-D); FLANN, "
+              "nanoflann and FAISS have no box search\n",
               static_cast<double>(p.half_width), refs.mean_count[2], p.nq, p.scan_boxes);
   std::size_t knn_bad = 0, radius_bad = 0, radius_boundary = 0, box_bad = 0;
   std::string details;  // which library and operation, where any count is not 0
+  std::string inexact;  // libraries whose answers are not exact by design, and how far they were off
   for (const auto& lib : libs) {
+    if (!lib->exact_answers()) {
+      inexact += "; " + lib->key + " (not exact by design): k-NN distances differing beyond 1e-5 relative: " +
+                 std::to_string(lib->disagreements[kKnn1] + lib->disagreements[kKnn10] + lib->disagreements[kBatch2]);
+      continue;
+    }
     knn_bad += lib->disagreements[kKnn1] + lib->disagreements[kKnn10] + lib->disagreements[kKnn1Loop] +
                lib->disagreements[kKnn10Loop] + lib->disagreements[kBatch2];
     radius_bad += lib->disagreements[kRadius10] + lib->disagreements[kRadius100];
@@ -740,8 +966,9 @@ void print_table(const Problem& p, const std::vector<std::unique_ptr<Library>>& 
               "(largest count over repetitions): k-NN distances differing beyond 1e-5 relative: %zu; radius counts "
               "differing: %zu (plus %zu explained by points within 1e-5 relative of the radius, where FLANN and "
               "nanoflann keep d² < r² and kdspace d <= r); box lists differing: %zu; kdspace's 10-NN versus brute "
-              "force on %zu queries (bit for bit) and its 1-NN versus its 10-NN: %zu%s\n\n",
-              knn_bad, radius_bad, radius_boundary, box_bad, p.brute_checks, refs.brute_disagreements, details.c_str());
+              "force on %zu queries (bit for bit) and its 1-NN versus its 10-NN: %zu%s%s\n\n",
+              knn_bad, radius_bad, radius_boundary, box_bad, p.brute_checks, refs.brute_disagreements, details.c_str(),
+              inexact.c_str());
 }
 
 std::string json_string(const std::string& s) {
@@ -798,9 +1025,108 @@ struct FilePair {
   std::string base, queries;
 };
 
+// ---- real data --------------------------------------------------------------------------------------
+
+constexpr const char* kImagesWorkload = "images128d";
+
+/// 256 query rows spread over the query set: the sample that calibrates radii and boxes.
+std::vector<float> calibration_sample(const Problem& p) {
+  std::vector<float> sample;
+  const std::size_t ns = std::min<std::size_t>(256, p.nq);
+  for (std::size_t i = 0; i < ns; ++i) {
+    const float* row = p.queries.data() + (i * p.nq / ns) * p.dim;
+    sample.insert(sample.end(), row, row + p.dim);
+  }
+  return sample;
+}
+
+/// A real scan or mesh as a workload: a random tenth of its points (fixed seed) held out as the
+/// queries, the rest the base, so that no query is a point of the base.
+Problem held_out_problem(const kdspace::bench::Mesh& mesh, std::size_t max_queries) {
+  Problem p;
+  p.name = mesh.name;
+  p.data = mesh.triangles.empty() ? "scan" : "mesh";
+  p.dim = 3;
+  std::vector<std::size_t> order(mesh.vertices.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::mt19937 rng(7);
+  std::shuffle(order.begin(), order.end(), rng);
+  p.nq = std::max<std::size_t>(1, order.size() / 10);
+  if (max_queries) p.nq = std::min(p.nq, max_queries);
+  p.n = order.size() - std::max<std::size_t>(1, order.size() / 10);
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    const auto& v = mesh.vertices[order[i]];
+    if (i < p.nq) p.queries.insert(p.queries.end(), v.begin(), v.end());
+    else if (i >= order.size() - p.n) p.base.insert(p.base.end(), v.begin(), v.end());
+  }
+  return p;
+}
+
+/// Dense SIFT-like 128-D descriptors (image_features.hpp) of 12 photographs as the base, 2000
+/// queries from the other view of one of them (its even descriptors).
+Problem image_problem(const std::string& folder, std::size_t divisor, std::size_t max_queries) {
+  using namespace kdspace_bench;
+  Problem p;
+  p.name = kImagesWorkload;
+  p.data = "sift-like";
+  p.dim = image_descriptor_dim;
+  std::fprintf(stderr, "%s: describing the photographs in %s\n", p.name.c_str(), folder.c_str());
+  std::vector<float> all;
+  for (const std::string& photo : base_photos()) {
+    const std::vector<float> one = photo_descriptors(folder + "/" + photo + ".png");
+    all.insert(all.end(), one.begin(), one.end());
+  }
+  p.base = evenly_spaced_rows(all, p.dim, all.size() / p.dim / divisor);
+  p.n = p.base.size() / p.dim;
+  const std::vector<float> view = photo_descriptors(folder + "/" + std::string(query_photo()) + ".png");
+  std::vector<float> even;
+  for (std::size_t r = 0; r < view.size() / p.dim; r += 2)
+    even.insert(even.end(), view.begin() + static_cast<long>(r * p.dim), view.begin() + static_cast<long>((r + 1) * p.dim));
+  p.queries = evenly_spaced_rows(even, p.dim, std::min<std::size_t>(max_queries ? max_queries : 2000, 2000) / divisor);
+  p.nq = p.queries.size() / p.dim;
+  return p;
+}
+
+// ---- the Python peers (a separate process: bench/python_peers.py) --------------------------------
+
+/// Writes the workload to a scratch folder as .npy, runs the script with /usr/bin/python3 (Debian's
+/// interpreter, which sees python3-scipy and python3-pykdtree) and prints its side table and JSON
+/// lines. kdspace's exact distances go along, so that the script checks the peers' answers.
+void run_python_peers(const std::string& script, const Problem& p, const std::vector<std::unique_ptr<Library>>& libs,
+                      const References& refs, std::size_t reps) {
+  char scratch[] = "/tmp/kdspace-bench-python-XXXXXX";
+  if (!mkdtemp(scratch)) throw kdspace::Error(std::string("cannot make a scratch folder: ") + std::strerror(errno));
+  const std::string dir = scratch;
+  namespace io = kdspace::io;
+  io::write_points(dir + "/base.npy", io::Matrix<float>{p.n, p.dim, p.base});
+  io::write_points(dir + "/queries.npy", io::Matrix<float>{p.nq, p.dim, p.queries});
+  io::write_points(dir + "/exact1.npy", io::Matrix<float>{p.nq, 1, refs.knn[0]->dists});
+  io::write_points(dir + "/exact10.npy", io::Matrix<float>{p.nq, 10, refs.knn[1]->dists});
+  // kdspace's best figures, for the ratios in the side table.
+  double build = -1, knn1 = -1, knn10 = -1;
+  for (const auto& lib : libs) {
+    if (!lib->is_kdspace) continue;
+    const double b = median(lib->seconds[kBuild]);
+    if (b > 0 && (build < 0 || b < build)) build = b;
+    knn1 = std::max(knn1, qps(*lib, kKnn1));
+    knn10 = std::max(knn10, qps(*lib, kKnn10));
+  }
+  const std::string command = "/usr/bin/python3 '" + script + "' '" + dir + "' '" + p.name + "' --reps " +
+                              std::to_string(reps) + " --min-time " + fixed(g_min_seconds, 3) +
+                              (g_cpu_clock ? " --clock cpu" : "") + " --kdspace " +
+                              fixed(build, 6) + " " + fixed(knn1, 1) + " " + fixed(knn10, 1);
+  std::fprintf(stderr, "%s: python peers: %s\n", p.name.c_str(), command.c_str());
+  std::fflush(stdout);
+  const int status = std::system(command.c_str());
+  std::filesystem::remove_all(dir);
+  if (status != 0) std::printf("- the Python peers failed (status %d): see stderr\n\n", status);
+}
+
 int usage() {
   std::fprintf(stderr,
-               "usage: kdspace-bench [--workload NAME]... [--quick] [--reps R] [--queries Q]\n"
+               "usage: kdspace-bench [--workload NAME]... [--quick] [--reps R] [--queries Q] [--min-time S]\n"
+               "                     [--clock wall|cpu]\n"
+               "                     [--real DIR] [--images DIR] [--python-peers SCRIPT]\n"
                "                     [--fvecs BASE QUERIES]... [--bvecs BASE QUERIES]... [--list]\n");
   return 2;
 }
@@ -827,6 +1153,7 @@ void add_fixed_dim(const Problem& p, std::vector<std::unique_ptr<Library>>& libs
 int main(int argc, char** argv) {
   std::vector<std::string> selected;
   std::vector<FilePair> files;
+  std::string real_dir, images_dir, python_peers;
   bool quick = false;
   std::size_t reps = 0, max_queries = 0;
   for (int i = 1; i < argc; ++i) {
@@ -842,46 +1169,82 @@ int main(int argc, char** argv) {
       const char* v = next();
       if (!v || std::strtoull(v, nullptr, 10) == 0) return usage();
       (arg == "--reps" ? reps : max_queries) = std::strtoull(v, nullptr, 10);
+    } else if (arg == "--clock") {
+      const char* v = next();
+      if (!v || (std::strcmp(v, "cpu") != 0 && std::strcmp(v, "wall") != 0)) return usage();
+      g_cpu_clock = std::strcmp(v, "cpu") == 0;
+    } else if (arg == "--min-time") {
+      const char* v = next();
+      if (!v || !(std::strtod(v, nullptr) >= 0)) return usage();
+      g_min_seconds = std::strtod(v, nullptr);
     } else if (arg == "--fvecs" || arg == "--bvecs") {
       const char* b = next();
       const char* q = next();
       if (!b || !q) return usage();
       files.push_back({b, q});
+    } else if (arg == "--real" || arg == "--images" || arg == "--python-peers") {
+      const char* v = next();
+      if (!v) return usage();
+      (arg == "--real" ? real_dir : arg == "--images" ? images_dir : python_peers) = v;
     } else if (arg == "--list") {
       for (const auto& w : kWorkloads) std::printf("%s\n", w.name);
+      std::printf("%s (with --images DIR)\nthe real sets' names (with --real DIR)\n", kImagesWorkload);
       return 0;
     } else {
       return usage();
     }
   }
+  std::vector<kdspace::bench::Mesh> real_sets;
+  try {
+    if (!real_dir.empty()) real_sets = kdspace::bench::read_real_meshes(real_dir);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "kdspace-bench: error: %s\n", e.what());
+    return 1;
+  }
   for (const auto& name : selected) {
-    bool known = false;
+    bool known = name == kImagesWorkload && !images_dir.empty();
     for (const auto& w : kWorkloads) known = known || name == w.name;
+    for (const auto& m : real_sets) known = known || name == m.name;
     if (!known) {
       std::fprintf(stderr, "kdspace-bench: unknown workload '%s' (--list shows them)\n", name.c_str());
       return 2;
     }
   }
+  auto wanted = [&](const std::string& name) {
+    return (selected.empty() && files.empty()) || std::find(selected.begin(), selected.end(), name) != selected.end();
+  };
   if (reps == 0) reps = quick ? 1 : 3;
   const std::size_t divisor = quick ? 10 : 1;
 
   // The workloads to run, in order: the built-in ones selected (all if none is named and no file is
-  // given), then the files.
+  // given), the real sets, the image descriptors, then the files.
   std::vector<const WorkloadSpec*> specs;
   for (const auto& w : kWorkloads)
-    if ((selected.empty() && files.empty()) || std::find(selected.begin(), selected.end(), w.name) != selected.end())
-      specs.push_back(&w);
+    if (wanted(w.name)) specs.push_back(&w);
 
   char date[32];
   const std::time_t now = std::time(nullptr);
   std::strftime(date, sizeof date, "%Y-%m-%d", std::localtime(&now));
+  set_threads(1);
   std::printf("## kdspace-bench (points), %s, %u hardware threads%s\n\n", date, std::thread::hardware_concurrency(),
               quick ? ", --quick (n and queries / 10)" : "");
-  std::printf("Libraries: kdspace %d.%d.%d PointTree<float> (leaf 16, median split on the axis of largest spread), FLANN "
-              "%s KDTreeSingleIndex (leaf 10, reordered), nanoflann 0x%x KDTreeSingleIndexAdaptor (leaf 10); "
+  std::printf("Libraries: kdspace %d.%d.%d PointTree<float> (default BuildParams), FLANN "
+              "%s KDTreeSingleIndex (leaf 10, reordered), nanoflann 0x%x KDTreeSingleIndexAdaptor (leaf 10)%s%s; "
               "compile-time dimension variants where the dimension is 3, 8 or 16. One thread unless a column says "
-              "otherwise; q/s = queries per second; builds on one thread.\n",
-              KDSPACE_VERSION_MAJOR, KDSPACE_VERSION_MINOR, KDSPACE_VERSION_PATCH, FLANN_VERSION_, NANOFLANN_VERSION);
+              "otherwise; q/s = queries per second; builds on one thread; each figure is the mean over as many "
+              "passes as take %.2f s (%s), median of the interleaved repetitions.\n",
+              KDSPACE_VERSION_MAJOR, KDSPACE_VERSION_MINOR, KDSPACE_VERSION_PATCH, FLANN_VERSION_, NANOFLANN_VERSION,
+#ifdef KDSPACE_BENCH_CGAL
+              ", CGAL " CGAL_VERSION_STR " Kd_tree (3-D only; sliding midpoint, bucket 10)",
+#else
+              ", no CGAL (not found at build time)",
+#endif
+#ifdef KDSPACE_BENCH_FAISS
+              (", FAISS IndexFlatL2 from 32-D on (its sgemm from " + blas_name() + ")").c_str(),
+#else
+              ", no FAISS (not found at build time)",
+#endif
+              g_min_seconds, g_cpu_clock ? "process CPU time: --clock cpu" : "wall time");
   std::printf("kdspace's 1-thread k-NN columns are knn_batch(..., threads = 1); the single-query-loop columns call "
               "knn() once per query. FLANN answers through its batch knnSearch (cores = 1), nanoflann one query at a "
               "time. index B/pt: bytes the index holds besides a copy of the points: kdspace index_bytes() / n; "
@@ -890,9 +1253,9 @@ int main(int argc, char** argv) {
               "(each within 1 + eps of the true one); FLANN's and nanoflann's eps bounds squared distances (so "
               "within sqrt(1 + eps)): at the same eps they search more exactly, compare recall too. FLANN batch "
               "on 2 threads = SearchParams::cores = 2 (OpenMP)%s. Ratio row: kdspace's better variant ÷ the best "
-              "peer (FLANN, nanoflann); above 1 = kdspace higher (better for q/s, worse for build s and B/pt); in "
+              "peer (FLANN, nanoflann, CGAL, FAISS); above 1 = kdspace higher (better for q/s, worse for build s and B/pt); in "
               "the single-query-loop columns the peers' figures are their 1-NN / 10-NN ones; in the box column the "
-              "plain scan stands in for the missing peer.\n",
+              "plain scan stands in where no peer has a box search.\n",
 #ifdef _OPENMP
               ""
 #else
@@ -915,6 +1278,12 @@ int main(int argc, char** argv) {
     add_fixed_dim<3>(p, libs, true);
     add_fixed_dim<8>(p, libs, true);
     add_fixed_dim<16>(p, libs, true);
+#ifdef KDSPACE_BENCH_CGAL
+    if (p.dim == 3) libs.push_back(std::make_unique<CgalLibrary>(p));
+#endif
+#ifdef KDSPACE_BENCH_FAISS
+    if (p.dim >= 32) libs.push_back(std::make_unique<FaissFlatLibrary>(p));
+#endif
     libs.push_back(std::make_unique<ScanLibrary>(p));
     References refs;
     for (std::size_t rep = 0; rep < reps; ++rep) {  // repetitions outside, libraries inside
@@ -923,10 +1292,11 @@ int main(int argc, char** argv) {
     }
     print_table(p, libs, refs, reps);
     print_json(p, libs, refs, reps);
+    if (!python_peers.empty()) run_python_peers(python_peers, p, libs, refs, reps);
     std::fflush(stdout);
     std::size_t bad = refs.brute_disagreements;
     for (const auto& lib : libs)
-      for (int op = 0; op < kOps; ++op) bad += lib->disagreements[op];
+      for (int op = 0; op < kOps; ++op) bad += lib->exact_answers() ? lib->disagreements[op] : 0;
     total_bad += bad;
   };
 
@@ -941,9 +1311,26 @@ int main(int argc, char** argv) {
       if (max_queries) p.nq = std::min(p.nq, max_queries);
       const bool clustered = p.data == "clustered";
       std::fprintf(stderr, "%s: generating %zu points, %zu queries\n", p.name.c_str(), p.n, p.nq);
+      if (p.data == "mfcc") {  // base, queries and calibration sample from different audio
+        p.base = kdspace_bench::mfcc_static(p.n, 1, p.dim);
+        p.queries = kdspace_bench::mfcc_static(p.nq, 2, p.dim);
+        run_problem(p, kdspace_bench::mfcc_static(256, 3, p.dim));
+        continue;
+      }
       p.base = make_points(p.n, p.dim, clustered, 1);
       p.queries = make_points(p.nq, p.dim, clustered, 2);
       run_problem(p, make_points(256, p.dim, clustered, 3));
+    }
+    for (const auto& mesh : real_sets) {
+      if (!wanted(mesh.name)) continue;
+      Problem p = held_out_problem(mesh, max_queries);
+      std::fprintf(stderr, "%s: %zu points of a real %s, %zu held out as queries\n", p.name.c_str(), p.n,
+                   p.data.c_str(), p.nq);
+      run_problem(p, calibration_sample(p));
+    }
+    if (!images_dir.empty() && wanted(kImagesWorkload)) {
+      Problem p = image_problem(images_dir, divisor, max_queries);
+      run_problem(p, calibration_sample(p));
     }
     for (const auto& f : files) {
       Problem p;
@@ -964,14 +1351,7 @@ int main(int argc, char** argv) {
       p.base = std::move(base.data);
       queries.data.resize(p.nq * p.dim);
       p.queries = std::move(queries.data);
-      // Calibration sample: 256 query rows spread over the query set.
-      std::vector<float> sample;
-      const std::size_t ns = std::min<std::size_t>(256, p.nq);
-      for (std::size_t i = 0; i < ns; ++i) {
-        const float* row = p.queries.data() + (i * p.nq / ns) * p.dim;
-        sample.insert(sample.end(), row, row + p.dim);
-      }
-      run_problem(p, sample);
+      run_problem(p, calibration_sample(p));
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "kdspace-bench: error: %s\n", e.what());

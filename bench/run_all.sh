@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs the whole benchmark and plots it:
-#   build/bench/bench/kdspace-bench (all point workloads)  -> bench/results/points.md, points.jsonl
+#   build/bench/bench/kdspace-bench (all point workloads, the real scans of bench/real_data/fetch.sh,
+#     the image descriptors, the Python peers)             -> bench/results/points.md, points.jsonl
 #   build/bench/bench/kdspace-rays-bench, when built       -> bench/results/rays.md, rays.jsonl
 #   build/bench/bench/kdspace-ann-bench                     -> bench/results/ann.md, ann.jsonl
 #   bench/run_collide.sh (kdspace-collide-bench), when built -> bench/results/collide.md, collide.jsonl
@@ -13,10 +14,11 @@
 #              (default docs), RAYS_BENCH_ARGS (options for kdspace-rays-bench), REAL_DATA_DIR (the
 #              real meshes for the rays bench; default BUILD_DIR/real_data, filled by
 #              bench/real_data/fetch.sh), ANN_BENCH_ARGS
-#              (options for kdspace-ann-bench), IMAGES_DIR (the photographs for the ann bench;
-#              default BUILD_DIR/photos, from Debian's python3-skimage package), AUDIO_DIR (the
-#              recordings for the ann bench; default BUILD_DIR/audio, from Debian's
-#              asterisk-core-sounds-en-wav and asc-music packages),
+#              (options for kdspace-ann-bench), IMAGES_DIR (the photographs for kdspace-bench and the
+#              ann bench; default BUILD_DIR/photos, from Debian's python3-skimage package), AUDIO_DIR
+#              (the recordings for the ann bench; default BUILD_DIR/audio, from Debian's
+#              asterisk-core-sounds-en-wav and asc-music packages), REAL_DIR (the real scans for
+#              kdspace-bench; default BUILD_DIR/real_data, filled by bench/real_data/fetch.sh),
 #              COLLIDE_BENCH_ARGS (options for kdspace-collide-bench; the meshes: see run_collide.sh)
 #
 # Build first: cmake --preset bench && cmake --build build/bench -j2
@@ -59,7 +61,49 @@ run_bench() {
   fi
 }
 
-run_bench points "$points_bench" "$@"
+# The data of kdspace-bench's image descriptors and the ann bench's real data sets, from Debian
+# packages downloaded and unpacked here (not installed; no Python runs): the photographs of
+# python3-skimage, a recorded voice (asterisk-core-sounds-en-wav) and recorded music (asc-music).
+# A package that cannot be fetched leaves its data sets out.
+fetch() {  # fetch PACKAGE DIR PATTERN: the files of PACKAGE whose path matches PATTERN, into DIR
+  local unpack
+  unpack=$(mktemp -d)
+  if (cd "$unpack" && apt-get download "$1" >/dev/null 2>&1) && dpkg -x "$unpack"/"$1"_*.deb "$unpack/x"; then
+    mkdir -p "$2"
+    (cd "$unpack/x" && find . -path "$3" -exec cp --parents {} "$2"/ \;)  # keeping their folders
+  else
+    echo "run_all.sh: apt-get download $1 failed" >&2
+  fi
+  rm -rf "$unpack"
+}
+images=${IMAGES_DIR:-$build/photos}
+audio=${AUDIO_DIR:-$build/audio}
+if [ ! -f "$images/motorcycle_right.png" ]; then  # the benches want the photographs in one folder
+  fetch python3-skimage "$images.tmp" '*skimage/data/*.png'
+  mkdir -p "$images" && find "$images.tmp" -name '*.png' -exec cp {} "$images"/ \; && rm -rf "$images.tmp"
+fi
+if [ -x "$ann_bench" ]; then
+  [ -d "$audio/speech" ] || fetch asterisk-core-sounds-en-wav "$audio/speech" '*/sounds/en_US_f_Allison/*.wav'
+  [ -d "$audio/music" ] || fetch asc-music "$audio/music" '*/asc/music/*.mp3'
+fi
+
+# Real 3-D scans and meshes from Debian packages (bench/real_data/fetch.sh: apt-get download, no
+# install) for kdspace-bench's real workloads.
+real=${REAL_DIR:-$build/real_data}
+if [ ! -f "$real/real_data.txt" ]; then
+  "$here/real_data/fetch.sh" "$real" || echo "run_all.sh: fetching the real scans failed; kdspace-bench runs without them" >&2
+fi
+points_args=()
+[ -f "$real/real_data.txt" ] && points_args+=(--real "$real")
+[ -f "$images/motorcycle_right.png" ] && points_args+=(--images "$images")
+# The Python peers (pykdtree, SciPy's cKDTree) run with Debian's interpreter, which sees their packages.
+if /usr/bin/python3 -c 'import pykdtree, scipy' 2>/dev/null; then
+  points_args+=(--python-peers "$here/python_peers.py")
+else
+  echo "run_all.sh: /usr/bin/python3 lacks pykdtree or scipy (python3-pykdtree, python3-scipy); no Python peers" >&2
+fi
+
+run_bench points "$points_bench" "${points_args[@]}" "$@"
 
 if [ -x "$rays_bench" ]; then
   # The real scenes (triangle boxes and voxels of real meshes): bench/real_data/fetch.sh downloads
@@ -83,31 +127,6 @@ else
   fi
 fi
 
-# The data of the ann bench's real data sets, from Debian packages downloaded and unpacked here (not
-# installed; no Python runs): the photographs of python3-skimage, a recorded voice
-# (asterisk-core-sounds-en-wav) and recorded music (asc-music). A package that cannot be fetched
-# leaves its data sets out.
-fetch() {  # fetch PACKAGE DIR PATTERN: the files of PACKAGE whose path matches PATTERN, into DIR
-  local unpack
-  unpack=$(mktemp -d)
-  if (cd "$unpack" && apt-get download "$1" >/dev/null 2>&1) && dpkg -x "$unpack"/"$1"_*.deb "$unpack/x"; then
-    mkdir -p "$2"
-    (cd "$unpack/x" && find . -path "$3" -exec cp --parents {} "$2"/ \;)  # keeping their folders
-  else
-    echo "run_all.sh: apt-get download $1 failed" >&2
-  fi
-  rm -rf "$unpack"
-}
-images=${IMAGES_DIR:-$build/photos}
-audio=${AUDIO_DIR:-$build/audio}
-if [ -x "$ann_bench" ]; then
-  if [ ! -f "$images/motorcycle_right.png" ]; then  # the bench wants the photographs in one folder
-    fetch python3-skimage "$images.tmp" '*skimage/data/*.png'
-    mkdir -p "$images" && find "$images.tmp" -name '*.png' -exec cp {} "$images"/ \; && rm -rf "$images.tmp"
-  fi
-  [ -d "$audio/speech" ] || fetch asterisk-core-sounds-en-wav "$audio/speech" '*/sounds/en_US_f_Allison/*.wav'
-  [ -d "$audio/music" ] || fetch asc-music "$audio/music" '*/asc/music/*.mp3'
-fi
 ann_args=()
 if [ -f "$images/motorcycle_right.png" ]; then ann_args+=(--images "$images"); fi
 if [ -d "$audio/speech" ] && [ -d "$audio/music" ]; then ann_args+=(--audio "$audio"); fi

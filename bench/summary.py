@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Condenses bench/results/points.jsonl (kdspace-bench) into one markdown table: per workload,
-kdspace's better variant against the best peer (FLANN, nanoflann) for each operation.
+kdspace's better variant against the best peer for each operation. The peers: FLANN, nanoflann,
+CGAL, FAISS's flat index and, from the Python side tables, pykdtree and SciPy's cKDTree.
 
 usage: bench/summary.py [points.jsonl]   (default bench/results/points.jsonl); markdown on stdout
 """
@@ -13,7 +14,7 @@ by = defaultdict(dict)  # (workload) -> {(library, op, threads): record}
 order = []
 for line in open(path):
     r = json.loads(line)
-    if r.get("bench") != "points":
+    if r.get("bench") not in ("points", "points-python"):
         continue
     w = r["workload"]
     if w not in order:
@@ -21,7 +22,7 @@ for line in open(path):
     by[w][(r["library"], r["op"], r.get("threads", 1), r.get("api"))] = r
 
 KD = ("kdspace-rt", "kdspace-ct")
-PEERS = ("flann", "nanoflann-rt", "nanoflann-ct")
+PEERS = ("flann", "nanoflann-rt", "nanoflann-ct", "cgal", "faiss-flat", "pykdtree", "scipy-ckdtree")
 
 
 def best(rec, libs, op, key, threads=1, lower=False, api=None):

@@ -12,8 +12,8 @@ packages=(
   libnanoflann-dev libembree-dev                             # benchmark peers
   libhnswlib-dev libfaiss-dev                                # approximate search peers (kdspace-ann-bench)
   libsndfile1-dev                                            # recordings for kdspace-ann-bench's MFCC
-  libcgal-dev                                                # collision tests (box_intersection_d)
-  libbullet-dev                                              # collision benchmark peer
+  libcgal-dev libopenblas-dev                                # kdspace-bench peers: CGAL Kd_tree, FAISS flat (OpenBLAS sgemm)
+  libbullet-dev                                              # collision benchmark peer (CGAL: collision tests)
   gnuplot-nox                                                # benchmark plots
   pybind11-dev python3-dev python3-numpy                     # the Python module (python/)
   python3-scipy python3-pytest                               # its tests (SciPy's kd-tree tests run against it)

@@ -121,6 +121,25 @@ write_csv("wide.csv", wide)
 write_bvecs("wide.bvecs", wide)
 write_csv("wide_query.csv", [[rng.randint(0, 9) for _ in range(16)] for _ in range(12)])
 
+# 2-D and 3-D sets searched by a compile-time-dimension tree, and the same points with zero columns
+# added up to 4-D, searched by the run-time-dimension tree: a zero term changes no distance, so the
+# two must write the same bytes. Random coordinates (rounding matters) with some repeated points.
+for d in (2, 3):
+    pts = [[round(rng.uniform(-5, 5), 6) for _ in range(d)] for _ in range(300)]
+    pts += [pts[i][:] for i in range(0, 300, 7)]
+    qs = [[round(rng.uniform(-5, 5), 6) for _ in range(d)] for _ in range(25)] + pts[:5]
+    pad = lambda rows: [r + [0.0] * (4 - d) for r in rows]
+    for name, rows in (("dimbase%d" % d, pts), ("dimquery%d" % d, qs)):
+        write_csv(name + ".csv", rows)
+        write_csv(name + "pad.csv", pad(rows))
+        write_npy(name + ".npy", rows)
+        write_npy(name + "pad.npy", pad(rows))
+    # The same in [0, 10) for --boxsize 10 (the padded axis, all zeros, adds nothing on the torus either).
+    for name, rows in (("dimbase%dbox" % d, pts), ("dimquery%dbox" % d, qs)):
+        moved = [[x + 5 for x in r] for r in rows]
+        write_csv(name + ".csv", moved)
+        write_csv(name + "pad.csv", pad(moved))
+
 # Radius: two tight groups far apart and a few points between, so rows differ in length.
 cl = [[0, 0], [1, 0], [0, 1], [1, 1], [2, 2], [10, 10], [11, 10], [20, 0], [30, 30], [31, 31]]
 write_csv("cluster.csv", cl)
@@ -306,6 +325,50 @@ assert not missing, "missing keys %s" % missing
 assert stats["build_s"] >= 0 and stats["query_s"] >= 0 and stats["threads"] >= 1, stats
 EOF
 }
+# ---- compile-time dimensions ----------------------------------------------------------------------
+# same_as_padded D EXT ARGS...: the D-dimensional run and the run on the points padded to 4-D with zero
+# columns write identical ids and distances (.csv: a double tree, .npy: a float tree). SET (default
+# empty) picks the files dimbase${D}${SET}; KNOWN (default "compile time") is the dim_known_at of
+# the D-dimensional run. With --self the runs read no query file.
+same_as_padded() {
+  local d=$1 ext=$2
+  shift 2
+  local set=${SET:-} known=${KNOWN:-compile time}
+  local name="$* on ${d}-D $ext: compile-time and run-time dimension trees write the same bytes"
+  local query=(--query dimquery$d$set.$ext) query_pad=(--query dimquery$d${set}pad.$ext)
+  case " $* " in *" --self "*) query=() query_pad=() ;; esac
+  expect_ok "$name" "$@" --base dimbase$d$set.$ext "${query[@]}" --out ids.ivecs --distances dist.fvecs --stats \
+    || return 0
+  if ! grep -qF "\"dim_known_at\": \"$known\"" out.txt; then fail "$name" "stdout: $(head -c 400 out.txt)"; return 0; fi
+  mv ids.ivecs ids_fixed.ivecs && mv dist.fvecs dist_fixed.fvecs
+  expect_ok "$name" "$@" --base dimbase$d${set}pad.$ext "${query_pad[@]}" --out ids.ivecs --distances dist.fvecs \
+    --stats || return 0
+  if ! grep -qF '"dim_known_at": "run time"' out.txt; then fail "$name" "stdout: $(head -c 400 out.txt)"; return 0; fi
+  if cmp -s ids.ivecs ids_fixed.ivecs && cmp -s dist.fvecs dist_fixed.fvecs; then pass "$name"
+  else fail "$name" "the outputs differ"; fi
+}
+for d in 2 3; do
+  for ext in csv npy; do
+    for metric in l2 l1 linf; do
+      same_as_padded $d $ext knn -k 8 --metric $metric
+      same_as_padded $d $ext radius -r 1.2 --metric $metric
+    done
+  done
+done
+same_as_padded 3 npy knn -k 5 --position median --leaf 3
+same_as_padded 2 csv radius -r 3 --max-results 4 --position sliding --axis cycle
+# The dual-tree joins (--self, --boxsize): 2-D and 3-D L2 joins run on the compile-time-dimension
+# tree; L1 and Linf joins on the run-time one (their fixed-dimension joins are not compiled).
+for d in 2 3; do
+  same_as_padded $d npy knn --self -k 6
+  SET=box same_as_padded $d csv knn -k 4 --boxsize 10
+  SET=box same_as_padded $d csv radius -r 1.5 --boxsize 10
+  for metric in l1 linf; do
+    KNOWN="run time" same_as_padded $d csv knn --self -k 6 --metric $metric
+    KNOWN="run time" SET=box same_as_padded $d csv radius -r 1.5 --boxsize 10 --metric $metric
+  done
+done
+
 common_keys="build_s query_s queries_per_s threads depth leaves nodes_visited_per_query points_visited_per_query points dim queries metric index_bytes"
 if expect_ok "knn --stats" knn --base base.csv --query query.csv -k 3 --out ids.ivecs --stats --threads=1; then
   check_stats "knn --stats is JSON with the required keys" "$common_keys k"

@@ -63,6 +63,8 @@ inline const char* name(PositionRule p) {
       return "middle";
     case PositionRule::sliding_midpoint:
       return "sliding_midpoint";
+    case PositionRule::midpoint:
+      return "midpoint";
   }
   return "?";
 }

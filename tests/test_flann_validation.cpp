@@ -122,7 +122,7 @@ std::vector<std::size_t> ks_for(std::size_t n) {
 std::vector<BuildParams> every_split_rule(std::initializer_list<std::size_t> leaf_sizes) {
   std::vector<BuildParams> out;
   for (AxisRule axis : {AxisRule::cycle, AxisRule::max_spread})
-    for (PositionRule position : {PositionRule::median, PositionRule::middle, PositionRule::sliding_midpoint})
+    for (PositionRule position : {PositionRule::median, PositionRule::middle, PositionRule::sliding_midpoint, PositionRule::midpoint})
       for (std::size_t leaf : leaf_sizes) {
         BuildParams p;
         p.axis = axis;

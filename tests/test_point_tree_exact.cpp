@@ -145,7 +145,7 @@ std::vector<BuildParams> every_split_rule() {
   std::vector<BuildParams> out;
   for (AxisRule axis : {AxisRule::cycle, AxisRule::max_spread})
     for (PositionRule position :
-         {PositionRule::median, PositionRule::middle, PositionRule::sliding_midpoint}) {
+         {PositionRule::median, PositionRule::middle, PositionRule::sliding_midpoint, PositionRule::midpoint}) {
       for (std::size_t leaf : {1, 2, 8, 50}) {
         BuildParams p;
         p.axis = axis;

@@ -122,3 +122,35 @@ TEST_CASE("scan: results do not depend on the thread count", "[points][exact][sc
   const auto one = tree.knn_batch(queries.data(), 333, 10, sp, 1);
   for (unsigned threads : {2u, 3u, 8u}) CHECK(tree.knn_batch(queries.data(), 333, 10, sp, threads).neighbors == one.neighbors);
 }
+
+TEST_CASE("scan: small-integer data (the 16-bit integer path) equals brute force bit for bit",
+          "[points][exact][scan]") {
+  // Byte values, values far from the origin with small extents, negative values, many exact ties
+  // (values in 0..3); then data just outside the path (extents too wide, queries between integers),
+  // which the estimated scan answers.
+  struct Case {
+    const char* name;
+    double offset;
+    int levels;             // coordinates are offset + an integer in [0, levels)
+    bool fractional_queries;
+  };
+  const Case c = GENERATE(Case{"bytes", 0, 256, false}, Case{"far from the origin", 1e6, 200, false},
+                          Case{"negative", -300, 256, false}, Case{"ties", 0, 4, false},
+                          Case{"extents too wide", 0, 3000, false}, Case{"queries between integers", 0, 256, true});
+  const std::size_t dim = GENERATE(as<std::size_t>{}, 1, 3, 17, 128, 129);
+  const std::size_t n = 1300;
+  std::mt19937 rng(4242 + static_cast<std::uint32_t>(dim));
+  std::uniform_int_distribution<int> level(0, c.levels - 1);
+  auto draw = [&](std::size_t count, bool fractional) {
+    std::vector<double> v(count * dim);
+    for (auto& x : v) x = c.offset + level(rng) + (fractional ? 0.5 : 0.0);
+    return v;
+  };
+  const std::vector<double> base = draw(n, false), queries = draw(90, c.fractional_queries);
+  const std::vector<float> base_f(base.begin(), base.end()), queries_f(queries.begin(), queries.end());
+  for (std::size_t k : {1, 10, 64}) {
+    INFO(c.name << " dim=" << dim << " k=" << k);
+    CHECK(scan_differs<float, kdspace::L2>(base_f, n, dim, queries_f, k, 2) == "");
+    CHECK(scan_differs<double, kdspace::L2>(base, n, dim, queries, k, 1) == "");
+  }
+}

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <limits>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -24,6 +25,7 @@
 #include "options.hpp"
 #include "progress.hpp"
 #include "search_job.hpp"
+#include "tree_dimension.hpp"
 
 namespace kdspace::cli {
 namespace {
@@ -101,34 +103,41 @@ Inputs<T, B> read_inputs(const SearchJob& job) {
   return in;
 }
 
-template <class T, class Metric>
-PointTree<T, Dynamic, Metric> build_tree(const io::Matrix<T>& base, const SearchJob& job) {
+template <class T, int Dim, class Metric>
+PointTree<T, Dim, Metric> build_tree(const io::Matrix<T>& base, const SearchJob& job) {
   try {
-    return PointTree<T, Dynamic, Metric>(base.data.data(), base.rows, base.cols, job.build);
+    return PointTree<T, Dim, Metric>(base.data.data(), base.rows, base.cols, job.build);
   } catch (const Error& e) {
     throw in_base_file(e, job);
   }
 }
 
 // Whether the batch goes through a dual-tree join (join_search.hpp).
-bool by_join(const SearchJob& job, std::size_t queries, std::size_t dim) {
-  const bool exact_knn = job.mode == Mode::knn && job.eps == 0;
-  return job.self || !job.boxsize.empty() || (exact_knn && join_is_faster(queries, dim));
-}
+bool by_join(const SearchJob& job) { return job.self || !job.boxsize.empty(); }
 
-template <class T, class Metric>
-NeighborLists<T> search(const PointTree<T, Dynamic, Metric>& tree, const io::Matrix<T>& queries,
+// The joins of a compile-time-dimension tree are compiled in the library for L2 only
+// (KDSPACE_JOIN_INSTANCES in kdspace/joins/joins.hpp); run_search sends a join under L1 or Linf to
+// the run-time-dimension tree, so that the command does not compile the joins again.
+template <int Dim, class Metric>
+inline constexpr bool joins_compiled_for = Dim == Dynamic || std::is_same_v<Metric, L2>;
+
+template <class T, int Dim, class Metric>
+NeighborLists<T> search(const PointTree<T, Dim, Metric>& tree, const io::Matrix<T>& queries,
                         const SearchJob& job, QueryStats& stats) {
-  if (by_join(job, queries.rows, tree.dim())) {
-    JoinRequest request;
-    request.knn = job.mode == Mode::knn;
-    request.k = job.k;
-    request.radius = job.radius;
-    request.max_results = job.max_results == std::numeric_limits<std::size_t>::max() ? 0 : job.max_results;
-    request.self = job.self;
-    request.boxsize = job.boxsize;
-    request.threads = job.threads;
-    return search_by_join(tree, queries, request, stats);
+  if (by_join(job)) {
+    if constexpr (joins_compiled_for<Dim, Metric>) {
+      JoinRequest request;
+      request.knn = job.mode == Mode::knn;
+      request.k = job.k;
+      request.radius = job.radius;
+      request.max_results = job.max_results == std::numeric_limits<std::size_t>::max() ? 0 : job.max_results;
+      request.self = job.self;
+      request.boxsize = job.boxsize;
+      request.threads = job.threads;
+      return search_by_join(tree, queries, request, stats);
+    } else {
+      throw std::logic_error("a join reached a tree whose joins are not compiled (see run_search)");
+    }
   }
   try {
     if (job.mode == Mode::knn) {
@@ -143,15 +152,15 @@ NeighborLists<T> search(const PointTree<T, Dynamic, Metric>& tree, const io::Mat
   }
 }
 
-template <class T, class Metric>
-int run_search(const SearchJob& job) {
-  Inputs<T> in = read_inputs<T>(job);
+// Build, search, write; Dim: the tree's dimension (tree_dimension.hpp), as a constant or Dynamic.
+template <class T, int Dim, class Metric>
+int build_and_search(const SearchJob& job, Inputs<T>& in) {
   io::Matrix<T>& base = in.base;
   const io::Matrix<T>& queries = in.queries;
 
   Progress build_progress("building the tree", Progress::Kind::elapsed);
   Clock::time_point start = Clock::now();
-  const PointTree<T, Dynamic, Metric> tree = build_tree<T, Metric>(base, job);
+  const PointTree<T, Dim, Metric> tree = build_tree<T, Dim, Metric>(base, job);
   const double build_s = seconds_since(start);
   build_progress.finish();
   const std::size_t points = base.rows;
@@ -172,8 +181,9 @@ int run_search(const SearchJob& job) {
     json.add("command", job.mode == Mode::knn ? "knn" : "radius")
         .add("points", std::uint64_t{points})
         .add("dim", std::uint64_t{tree.dim()})
+        .add("dim_known_at", Dim != Dynamic ? "compile time" : "run time")
         .add("queries", std::uint64_t{found.rows()});
-    json.add("method", by_join(job, queries.rows, tree.dim()) ? "dual-tree join" : "tree");
+    json.add("method", by_join(job) ? "dual-tree join" : "tree");
     if (job.self) json.add("self", "yes");
     if (!job.boxsize.empty()) json.add("boxsize", job.boxsize);
     if (job.mode == Mode::knn) {
@@ -198,6 +208,16 @@ int run_search(const SearchJob& job) {
     std::printf("%s\n", json.str().c_str());
   }
   return 0;
+}
+
+template <class T, class Metric>
+int run_search(const SearchJob& job) {
+  Inputs<T> in = read_inputs<T>(job);
+  if constexpr (!std::is_same_v<Metric, L2>)  // a join under L1 or Linf: see joins_compiled_for
+    if (by_join(job)) return build_and_search<T, Dynamic, Metric>(job, in);
+  return with_tree_dimension(in.base.cols, [&](auto dim) {
+    return build_and_search<T, decltype(dim)::value, Metric>(job, in);
+  });
 }
 
 // The forest's counterpart of run_search: build (and tune), search, write, and measure the recall on

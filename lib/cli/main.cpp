@@ -22,8 +22,8 @@ kdspace overlaps --boxes A.boxes [--with B.boxes] --out PAIRS.pairs [--build bin
 kdspace demo   [--out DIR] [--threads T] [--quick]
                runs the whole library on built-in generated data, checks it, prints a table
 kdspace --version | --help
-build options: --axis cycle|spread  --position median|middle|sliding  --leaf N  --max-depth D  --metric l2|l1|linf
-               (defaults: spread, median, 16, 64, l2)
+build options: --axis cycle|spread  --position midpoint|median|middle|sliding  --leaf N  --max-depth D  --metric l2|l1|linf
+               (defaults: spread, midpoint, 24, 64, l2)
 approximate:   --eps E (exact tree, (1+E) bound)  |  --forest T --checks C (randomized forest)  |  --recall R (tune the forest, then search)
                (--forest and --recall: l2 only; distances returned are exact; see 'kdspace knn --help')
 

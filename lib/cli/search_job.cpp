@@ -71,8 +71,10 @@ const char* const stats_and_build_usage =
                        queries, k or radius, metric, index_bytes (times without file I/O)
 build options:
   --axis cycle|spread               split axis (default spread: the axis of largest spread)
-  --position median|middle|sliding  split position (default median)
-  --leaf N                          at most N points a leaf (default 16)
+  --position midpoint|median|middle|sliding
+                                    split position (default midpoint: the middle of the node's
+                                    points' extent)
+  --leaf N                          at most N points a leaf (default 24)
   --max-depth D                     0..256 (default 64)
   --metric l2|l1|linf               (default l2)
 Exit codes: 0 success, 2 usage error, 1 bad data or I/O error.
@@ -190,10 +192,11 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
   const BuildParams defaults;
   job.build.axis =
       o.choice("--axis", "spread", {"cycle", "spread"}) == "cycle" ? AxisRule::cycle : AxisRule::max_spread;
-  const std::string position = o.choice("--position", "median", {"median", "middle", "sliding"});
+  const std::string position = o.choice("--position", "midpoint", {"midpoint", "median", "middle", "sliding"});
   job.build.position = position == "middle"    ? PositionRule::middle
                        : position == "sliding" ? PositionRule::sliding_midpoint
-                                               : PositionRule::median;
+                       : position == "median"  ? PositionRule::median
+                                               : PositionRule::midpoint;
   job.build.leaf_size = o.count("--leaf", defaults.leaf_size, 1, no_limit);
   job.build.max_depth = o.count("--max-depth", defaults.max_depth, 0, 256);
   job.metric = o.choice("--metric", "l2", {"l2", "l1", "linf"});

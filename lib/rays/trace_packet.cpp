@@ -59,13 +59,15 @@ struct PacketEntry {
 
 bool BoxTree::packet_fits(const Ray* rays) const {
   if (!float_range_ || boxes_.empty()) return false;
-  for (int l = 0; l < 4; ++l) {
-    if (!detail::fits_float_traversal(rays[l], float_trace_limit)) return false;
+  // The signs first, of all four rays: incoherent rays (four random rays share their signs one
+  // time in 512) are turned away before the costlier range checks.
+  for (int l = 0; l < 4; ++l)
     for (int a = 0; a < 3; ++a) {
       const float d = rays[l].direction[a];
       if (d == 0 || std::signbit(d) != std::signbit(rays[0].direction[a])) return false;
     }
-  }
+  for (int l = 0; l < 4; ++l)
+    if (!detail::fits_float_traversal(rays[l], float_trace_limit)) return false;
   return true;
 }
 

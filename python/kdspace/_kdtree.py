@@ -336,6 +336,9 @@ class KDTree:
         results = [[] for _ in range(self.n)]
         if self._core is None or other._core is None:
             return results
+        joined = self._core.join_pairs(other._core, radius, p, "lists")
+        if joined is not None:
+            return joined
         queries, ids = self._query_rows()
         lists = other._core.ball_lists(queries, np.full(len(queries), radius), p, 1, True)
         for row, found in zip(ids.tolist(), lists):
@@ -353,8 +356,12 @@ class KDTree:
         if self._core is None:
             first = second = np.empty(0, dtype=np.intp)
         else:
-            queries, ids = self._query_rows()
-            first, second, _ = self._core.ball_pairs(queries, radius, p, 1, ids, True)
+            joined = self._core.join_pairs(None, radius, p, "pairs")
+            if joined is not None:
+                first, second = joined
+            else:
+                queries, ids = self._query_rows()
+                first, second, _ = self._core.ball_pairs(queries, radius, p, 1, ids, True)
         if output_type == "set":
             return set(zip(first.tolist(), second.tolist()))
         return np.stack([first, second], axis=1).astype(np.intp, copy=False).reshape(-1, 2)
@@ -439,8 +446,12 @@ class KDTree:
             first = second = np.empty(0, dtype=np.intp)
             values = np.empty(0)
         else:
-            queries, ids = self._query_rows()
-            first, second, values = other._core.ball_pairs(queries, max_distance, p, 1, ids, False)
+            joined = self._core.join_pairs(other._core, max_distance, p, "distances")
+            if joined is not None:
+                first, second, values = joined
+            else:
+                queries, ids = self._query_rows()
+                first, second, values = other._core.ball_pairs(queries, max_distance, p, 1, ids, False)
         if output_type == "dict":
             return dict(zip(zip(first.tolist(), second.tolist()), values.tolist()))
         if output_type == "ndarray":

@@ -46,6 +46,7 @@ class PointIndex {
     params.position = balanced ? PositionRule::median : PositionRule::sliding_midpoint;
     if (boxsize.size() > 0) {
       const double* size = values_of(boxsize, dim, "boxsize");
+      join_box_.assign(size, size + dim);
       box_ = std::make_unique<PeriodicBox<double>>();
       box_->size.assign(size, size + dim);
       box_->lo.assign(dim, std::numeric_limits<double>::infinity());
@@ -55,6 +56,11 @@ class PointIndex {
           box_->lo[a] = std::min(box_->lo[a], static_cast<double>(rows.data()[i * dim + a]));
           box_->hi[a] = std::max(box_->hi[a], static_cast<double>(rows.data()[i * dim + a]));
         }
+      // The joins take the box in T, where L may round down onto a point; such a tree keeps to the
+      // single-tree path.
+      for (std::size_t a = 0; a < dim; ++a)
+        if (size[a] > 0 && !(box_->hi[a] < static_cast<double>(static_cast<T>(size[a]))))
+          join_box_ok_ = false;
     }
     const T* data = rows.data();
     py::gil_scoped_release unlocked;
@@ -136,6 +142,34 @@ class PointIndex {
                           take_vector(std::move(distance), {count}));
   }
 
+  /// The pairs within r by a join (Searcher::join_pairs) of this tree with `other` (a PointIndex; None:
+  /// this tree's own pairs, each once), or None where the join does not apply (p not 1, 2 or inf,
+  /// other of another type or periodic box). `output`: "pairs" (rows first, second), "distances"
+  /// (first, second, distance) or "lists" (for each of this set's rows, a list of other's rows,
+  /// ascending).
+  py::object join_pairs(py::object other, double r, double p, const std::string& output) {
+    if (output != "pairs" && output != "distances" && output != "lists")
+      throw Error("unknown output " + output);
+    if (!joins_metric(p) || !join_box_ok_) return py::none();
+    PointIndex* b = nullptr;
+    if (!other.is_none() && !(b = joinable_with(other, p))) return py::none();
+    auto first = with_metric(p);
+    auto second = b ? b->with_metric(p) : nullptr;
+    PairRows pairs;
+    bool joined = false;
+    {
+      py::gil_scoped_release unlocked;
+      joined = first->join_pairs(second.get(), r, output == "distances", join_params(), pairs);
+    }
+    if (!joined) return py::none();
+    if (output == "lists") return row_lists(pairs);
+    const auto count = static_cast<py::ssize_t>(pairs.first.size());
+    py::array_t<RowId> first_rows = take_vector(std::move(pairs.first), {count});
+    py::array_t<RowId> second_rows = take_vector(std::move(pairs.second), {count});
+    if (output == "pairs") return py::make_tuple(first_rows, second_rows);
+    return py::make_tuple(first_rows, second_rows, take_vector(std::move(pairs.distance), {count}));
+  }
+
   /// Weighted or unweighted pair counts per bin (see Searcher::pair_histogram).
   py::array_t<double> pair_histogram(const CArray<T>& queries, py::object query_weights,
                                      const CArray<double>& radii, py::object point_weights, double p,
@@ -215,6 +249,39 @@ class PointIndex {
     return matches;
   }
 
+  static bool joins_metric(double p) { return p == 1 || p == 2 || std::isinf(p); }
+
+  // `other` as a PointIndex the joins can pair with this one (same scalar, same periodic box, p one
+  // the joins serve), or null.
+  PointIndex* joinable_with(const py::object& other, double p) {
+    if (!joins_metric(p) || !join_box_ok_) return nullptr;
+    if (other.is_none() || !py::isinstance<PointIndex>(other)) return nullptr;
+    PointIndex* b = other.cast<PointIndex*>();
+    return b->join_box_ok_ && b->join_box_ == join_box_ ? b : nullptr;
+  }
+
+  // The pair methods run on one thread, as SciPy's.
+  JoinParams join_params() const {
+    JoinParams params;
+    params.threads = 1;
+    params.boxsize = join_box_;
+    return params;
+  }
+
+  // For each of the caller's rows, the list of second rows of its pairs (pairs ordered by rows).
+  py::list row_lists(const PairRows& pairs) const {
+    std::vector<std::size_t> sizes(static_cast<std::size_t>(n_rows_), 0);
+    for (const RowId row : pairs.first) ++sizes[static_cast<std::size_t>(row)];
+    py::list out(static_cast<std::size_t>(n_rows_));
+    std::size_t at = 0;
+    for (std::size_t row = 0; row < sizes.size(); ++row) {
+      py::list found(sizes[row]);
+      for (std::size_t j = 0; j < sizes[row]; ++j, ++at) found[j] = py::int_(pairs.second[at]);
+      out[row] = std::move(found);
+    }
+    return out;
+  }
+
   QueryOptions options(unsigned threads) const { return QueryOptions{threads, box_.get()}; }
 
   // The tree searched with the p-norm: the built one for p = 2, otherwise a copy made on first use
@@ -239,6 +306,8 @@ class PointIndex {
   std::shared_ptr<const Searcher<T>> base_;
   std::deque<std::pair<double, std::shared_ptr<const Searcher<T>>>> copies_;
   std::unique_ptr<PeriodicBox<double>> box_;
+  std::vector<double> join_box_;  // the box for the joins (JoinParams::boxsize); empty: none
+  bool join_box_ok_ = true;       // false: the joins cannot take this tree's box (see the constructor)
   RowId n_rows_ = 0;
 };
 
@@ -260,6 +329,8 @@ void bind_point_index(py::module_& m, const char* name) {
            py::arg("threads"), py::arg("sort_rows"))
       .def("ball_pairs", &PointIndex<T>::ball_pairs, py::arg("queries"), py::arg("radius"), py::arg("p"),
            py::arg("threads"), py::arg("query_rows"), py::arg("after_query_row"))
+      .def("join_pairs", &PointIndex<T>::join_pairs, py::arg("other"), py::arg("r"), py::arg("p"),
+           py::arg("output"))
       .def("pair_histogram", &PointIndex<T>::pair_histogram, py::arg("queries"), py::arg("query_weights"),
            py::arg("radii"), py::arg("point_weights"), py::arg("p"), py::arg("threads"))
       .def("nodes", &PointIndex<T>::nodes)

@@ -2,6 +2,11 @@
 // k above the number of points, eps), points within a radius (lists, counts, distances) and pair
 // counts at many radii, optionally on a periodic box; batches spread over threads.
 //
+// The pair methods (pairs within a distance, sparse distance matrices) go through the library's
+// dual-tree joins (kdspace/joins/joins.hpp) for p = 1, 2 and infinity; other p, and two trees of
+// different types, take the single-tree path (ball_matches). Pair counts stay on the single-tree
+// path (pair_histogram), measured faster than count_pairs up to ~100 pairs per point (README).
+//
 // Searcher<T> is what the Python layer holds: T is the scalar of the caller's queries and distances
 // (the data's, float32 or float64). TreeSearcher<Tree, T> implements it over one PointTree; its
 // with_metric() copies the tree into another metric (PointTree's copying constructor: no new
@@ -19,6 +24,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "kdspace/joins/joins.hpp"
 #include "kdspace/metric.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
@@ -43,6 +49,12 @@ struct RowMap {
 struct Match {
   RowId row;
   double distance;
+};
+
+/// Pairs as rows: (first[i], second[i]), ordered by first then second; distance[i] when asked for.
+struct PairRows {
+  std::vector<RowId> first, second;
+  std::vector<double> distance;
 };
 
 /// Options every query shares: threads (0 = all) and the periodic box (null: none).
@@ -74,6 +86,13 @@ class Searcher {
                               const std::vector<double>& radii, const double* point_weights,
                               const QueryOptions& options, double* bins) const = 0;
 
+  /// The pairs (this tree's row, other's row) within r (closed; r < 0: none), with distances if
+  /// `distances`, by a join; other null: the pairs of this tree's distinct points, each once
+  /// (first < second). False, doing nothing, where the joins do not apply (a metric they do not
+  /// serve, p not 1, 2 or infinity; other of another type): the caller takes the single-tree path.
+  virtual bool join_pairs(const Searcher<T>* other, double r, bool distances, const JoinParams& params,
+                          PairRows& out) const = 0;
+
   /// The same tree searched with the Minkowski p-norm (1, 2, infinity or any p >= 1).
   virtual std::shared_ptr<const Searcher<T>> with_metric(double p) const = 0;
 
@@ -92,6 +111,11 @@ template <class Tree, class T>
 class TreeSearcher final : public Searcher<T> {
   using S = typename Tree::Scalar;  // the tree's scalar: T, or double for a widened float tree
   static_assert(std::is_same_v<S, T> || std::is_same_v<S, double>, "a tree holds T or double");
+  using Metric = std::decay_t<decltype(std::declval<const Tree&>().metric())>;
+  // The metrics the joins serve (kdspace/joins/space.hpp).
+  static constexpr bool joinable =
+      std::is_same_v<S, T> &&
+      (std::is_same_v<Metric, L2> || std::is_same_v<Metric, L1> || std::is_same_v<Metric, Linf>);
 
  public:
   TreeSearcher(Tree tree, std::shared_ptr<const RowMap> map) : tree_(std::move(tree)), map_(std::move(map)) {}
@@ -208,6 +232,40 @@ class TreeSearcher final : public Searcher<T> {
     }
   }
 
+  bool join_pairs(const Searcher<T>* other, double r, bool distances, const JoinParams& params,
+                  PairRows& out) const override {
+    if constexpr (!joinable) {
+      return false;
+    } else {
+      const auto* b = dynamic_cast<const TreeSearcher*>(other);
+      if (other && !b) return false;
+      out = {};
+      if (r < 0) return true;
+      const RowMap& other_rows = b ? *b->map_ : *map_;
+      auto put = [&](std::uint32_t x, std::uint32_t y) {
+        out.first.push_back((*map_)(x));
+        out.second.push_back(other_rows(y));
+      };
+      // Rows ascend with the tree's indices (row_ids ascend), so the joins' (a, b) order is the rows'.
+      if (distances) {
+        const auto found = b ? distances_within(tree_, b->tree_, radius_of(r), params)
+                             : distances_within(tree_, radius_of(r), params);
+        out.distance.reserve(found.size());
+        for (const auto& f : found) {
+          put(f.a, f.b);
+          out.distance.push_back(static_cast<double>(f.distance));
+        }
+      } else {
+        const auto found = b ? pairs_within(tree_, b->tree_, radius_of(r), params)
+                             : pairs_within(tree_, radius_of(r), params);
+        out.first.reserve(found.size());
+        out.second.reserve(found.size());
+        for (const auto& f : found) put(f.a, f.b);
+      }
+      return true;
+    }
+  }
+
   std::shared_ptr<const Searcher<T>> with_metric(double p) const override {
     if (p == 2) return copy_into<S, L2>(L2{});
     if (p == 1) return copy_into<S, L1>(L1{});
@@ -267,9 +325,15 @@ class TreeSearcher final : public Searcher<T> {
     return tree_.metric().to_internal(static_cast<S>(distance));
   }
 
-  template <class S2, class Metric>
-  std::shared_ptr<const Searcher<T>> copy_into(const Metric& metric) const {
-    using Copy = PointTree<S2, Dynamic, Metric>;
+  // A radius (>= 0) as the tree's scalar; +inf beyond its range.
+  static S radius_of(double r) {
+    return r < static_cast<double>(std::numeric_limits<S>::max()) ? static_cast<S>(r)
+                                                                   : std::numeric_limits<S>::infinity();
+  }
+
+  template <class S2, class M>
+  std::shared_ptr<const Searcher<T>> copy_into(const M& metric) const {
+    using Copy = PointTree<S2, Dynamic, M>;
     return std::make_shared<TreeSearcher<Copy, T>>(Copy(tree_, metric), map_);
   }
 

@@ -127,6 +127,48 @@ def test_large_p_is_computed_in_double_even_for_float32_data():
     assert_same_neighbours(d.astype(np.float64), i, want_d, want_i, 1e-6, data, queries, 60)
 
 
+@pytest.mark.parametrize("dtypes", [(np.float64, np.float64), (np.float32, np.float32), (np.float32, np.float64)])
+@pytest.mark.parametrize("p", [1, 2, 3.5, np.inf])
+@pytest.mark.parametrize("shape", SHAPES)
+def test_pair_methods_equal_brute_force(shape, p, dtypes):
+    # p = 1, 2, inf with one dtype go through the dual-tree joins, the rest through single-tree
+    # queries; both must find the pairs within r (up to rounding at r) and nothing else.
+    a, b = points(shape, 150, 3, 11, dtypes[0]), points(shape, 120, 3, 12, dtypes[1])
+    a[[4, 90]] = np.nan  # never paired
+    tree_a, tree_b = kdspace.KDTree(a), kdspace.KDTree(b)
+    ab, aa = minkowski(a, b, p), minkowski(a, a, p)
+    wa, wb = np.random.default_rng(3).random((2, 150))[0], np.random.default_rng(4).random(120)
+
+    def check(found, dist, r):
+        assert not (found & ~(dist <= r * (1 + 1e-6))).any(), "a pair beyond r"
+        assert not (~found & (dist <= r * (1 - 1e-6))).any(), "a pair within r missing"
+
+    for r in [0.0, 0.3, 1.0, 2.0]:
+        lists = tree_a.query_ball_tree(tree_b, r, p=p)
+        found = np.zeros(ab.shape, dtype=bool)
+        for i, row in enumerate(lists):
+            assert row == sorted(row)
+            found[i, row] = True
+        check(found, ab, r)
+        assert tree_a.count_neighbors(tree_b, r, p=p) == found.sum()
+        np.testing.assert_allclose(tree_a.count_neighbors(tree_b, r, p=p, weights=(wa, wb)),
+                                   (wa[:, None] * wb[None, :])[found].sum(), rtol=1e-9, atol=1e-12)
+        matrix = tree_a.sparse_distance_matrix(tree_b, r, p=p, output_type="dict")
+        assert set(matrix) == set(zip(*np.nonzero(found)))
+        np.testing.assert_allclose([matrix[key] for key in sorted(matrix)],
+                                   [ab[key] for key in sorted(matrix)], rtol=1e-5, atol=1e-6)
+        pairs = tree_a.query_pairs(r, p=p, output_type="ndarray")
+        found = np.zeros(aa.shape, dtype=bool)
+        found[pairs[:, 0], pairs[:, 1]] = True
+        assert (pairs[:, 0] < pairs[:, 1]).all() and len(np.unique(pairs, axis=0)) == len(pairs)
+        check(found, np.where(np.tri(len(a), dtype=bool), np.inf, aa), r)
+    radii = [2.0, 0.0, 1.0, 1.0, 0.3]
+    totals = tree_a.count_neighbors(tree_b, radii, p=p)
+    np.testing.assert_array_equal(totals, [tree_a.count_neighbors(tree_b, r, p=p) for r in radii])
+    per_bin = tree_a.count_neighbors(tree_b, sorted(radii), p=p, cumulative=False)
+    np.testing.assert_array_equal(np.cumsum(per_bin), np.sort(totals))
+
+
 # ---- against SciPy's cKDTree ---------------------------------------------------------------------------
 
 @pytest.mark.parametrize("boxsize", [None, 1.0])

@@ -33,6 +33,7 @@
 #include "kdspace/points/detail/node.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
+#include "kdspace/points/detail/row_bounds.hpp"
 #include "kdspace/points/neighbor.hpp"
 #include "kdspace/points/params.hpp"
 
@@ -136,9 +137,10 @@ class PointTree {
     check_query(q, "query");
     std::vector<detail::Candidate<T>> scratch;
     QueryStats local;
-    detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
-    run(q, results, params, local);
-    return finish(results.sorted(), stats, local);
+    return detail::with_knn_results(k, std::numeric_limits<T>::infinity(), scratch, [&](auto& results) {
+      run(q, results, params, local);
+      return finish(results.sorted(), stats, local);
+    });
   }
 
   /// Every point within distance r of q (closed ball), ascending distance then index; r in the
@@ -178,18 +180,19 @@ class PointTree {
     check_search_params(params);
     check_queries(queries, nq);
     NeighborLists<T> out;
-    out.offsets.resize(nq + 1);
-    for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
+    // Offsets 0, k, 2k, ... (grown by push_back: GCC 12 warns falsely on a resize here, -Warray-bounds).
+    for (std::size_t q = 1; q <= nq; ++q) out.offsets.push_back(q * k);
     out.neighbors.resize(nq * k);
     std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
     auto by_tree = [&](std::size_t first, std::size_t last) {
+      const std::vector<std::size_t> visit = visit_order(queries, first, last);
       detail::parallel_for(last - first, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
         std::vector<detail::Candidate<T>> scratch;
-        for (std::size_t q = first + begin; q < first + end; ++q) {
-          detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
-          run(queries + q * dim(), results, params, per_worker[worker]);
-          write(results.sorted(), out.neighbors.data() + q * k);
-        }
+        for (std::size_t i = begin; i < end; ++i)
+          detail::with_knn_results(k, std::numeric_limits<T>::infinity(), scratch, [&, q = visit[i]](auto& results) {
+            run(queries + q * dim(), results, params, per_worker[worker]);
+            write(results.sorted(), out.neighbors.data() + q * k);
+          });
       });
     };
     const bool exact = params.eps == 0 && params.max_checks == std::numeric_limits<std::size_t>::max();
@@ -222,9 +225,11 @@ class PointTree {
     const T limit = metric_.to_internal(r);
     std::vector<std::vector<Neighbor<T>>> rows(nq);
     std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
+    const std::vector<std::size_t> visit = visit_order(queries, 0, nq);
     detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
       std::vector<detail::Candidate<T>> scratch;
-      for (std::size_t q = begin; q < end; ++q) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const std::size_t q = visit[i];
         radius_into(queries + q * dim(), limit, max_results, scratch, per_worker[worker]);
         rows[q].resize(scratch.size());
         write(scratch, rows[q].data());
@@ -266,13 +271,15 @@ class PointTree {
  private:
   // ---- validation ---------------------------------------------------------------------------------
 
+  // The checks that need no pass over the points; build() finds any non-finite coordinate in the
+  // pass that takes the bounds.
   void validate_build(const T* rows, std::size_t n, std::size_t dim, const BuildParams& params) const {
     if (Dim != Dynamic && dim != 0 && dim != static_cast<std::size_t>(Dim))
       throw Error("points have dimension " + std::to_string(dim) + ", this tree is built for dimension " +
                   std::to_string(Dim));
     if (params.leaf_size == 0) throw Error("leaf_size must be at least 1");
     if (params.max_depth > 256) throw Error("max_depth must be at most 256, got " + std::to_string(params.max_depth));
-    detail::check_points(rows, n, dim);
+    detail::check_points(rows, n, dim, /*check_values=*/false);
   }
 
   void check_k(std::size_t k) const { detail::check_k(k, size()); }
@@ -306,13 +313,10 @@ class PointTree {
     const std::size_t d = dim();
     root_lo_.assign(rows, rows + d);
     root_hi_.assign(rows, rows + d);
-    for (std::size_t i = 1; i < n; ++i)
-      for (std::size_t a = 0; a < d; ++a) {
-        root_lo_[a] = std::min(root_lo_[a], rows[i * d + a]);
-        root_hi_[a] = std::max(root_hi_[a], rows[i * d + a]);
-      }
+    if (detail::widen_bounds<Dim, true>(rows, n, d, root_lo_.data(), root_hi_.data()) != 0)
+      detail::check_points(rows, n, d);  // a coordinate is not finite: find it for the message
     detail::BuiltTree<T> built = detail::with_split_rules(params, [&](auto axis_rule, auto position_rule) {
-      using Builder = detail::Builder<T, decltype(axis_rule), decltype(position_rule)>;
+      using Builder = detail::Builder<T, Dim, decltype(axis_rule), decltype(position_rule)>;
       return Builder(rows, n, d, params).build(root_lo_.data(), root_hi_.data());
     });
     nodes_ = std::move(built.nodes);
@@ -351,8 +355,8 @@ class PointTree {
     const T* q;
     T* axis_terms;  // contribution of each axis to the current cell bound
     T prune_scale;  // bound * prune_scale > kept distance => prune
-    std::uint64_t checks_end;  // stop looking further once stats->points_visited reaches this
-    QueryStats* stats;
+    std::uint64_t checks_end;  // stop looking further once points_visited reaches this
+    std::uint64_t nodes_visited, points_visited;  // this query's counts, from the stats' totals
   };
 
   template <class Results>
@@ -372,15 +376,20 @@ class PointTree {
     const std::uint64_t checks_end = params.max_checks > UINT64_MAX - stats.points_visited
                                          ? UINT64_MAX
                                          : stats.points_visited + params.max_checks;
-    Context ctx{q, terms.data, prune_margin_ * eps_scale, checks_end, &stats};
+    Context ctx{q, terms.data, prune_margin_ * eps_scale, checks_end, stats.nodes_visited, stats.points_visited};
     ++stats.queries;
     if (!(bound * ctx.prune_scale > results.bound())) search(0, bound, ctx, results);
+    stats.nodes_visited = ctx.nodes_visited;
+    stats.points_visited = ctx.points_visited;
   }
 
+  // Depth first, the nearer child first, with the incremental cell bound of Arya & Mount: a far
+  // child's bound differs from its parent's in one axis's term only. (An explicit stack in place of
+  // the recursion measured 3-7% slower on 3-D scans: the recursion keeps the path in registers.)
   template <class Results>
   void search(std::uint32_t id, T bound, Context& ctx, Results& results) const {
     const Node& node = nodes_[id];
-    ++ctx.stats->nodes_visited;
+    ++ctx.nodes_visited;
     if (node.is_leaf()) {
       scan_leaf(node, ctx, results);
       return;
@@ -401,27 +410,57 @@ class PointTree {
     const T far_bound = metric_.replace(bound, old_term, new_term);
     if (far_bound * ctx.prune_scale > results.bound()) return;
     // The check budget ends the search only once k candidates are in hand.
-    if (ctx.stats->points_visited >= ctx.checks_end && results.full()) return;
+    if (ctx.points_visited >= ctx.checks_end && results.full()) return;
     ctx.axis_terms[axis] = new_term;
     search(far, far_bound, ctx, results);
     ctx.axis_terms[axis] = old_term;
   }
 
+  // Under L2 a run-time dimension from 2 to 8 scans its leaves with the dimension as a constant, so
+  // that the distance loop unrolls as in a compile-time tree: a switch per leaf, which the branch
+  // predictor learns at once. A PointTree<float> of 2..8-D points then answers as fast as
+  // PointTree<float, D> (within 5%, where it was 8-18% slower); L1 and Linf keep their code small.
   template <class Results>
   void scan_leaf(const Node& leaf, Context& ctx, Results& results) const {
+    if constexpr (Dim == Dynamic && std::is_same_v<Metric, L2>) {
+      switch (dim_) {
+        case 2: return scan_leaf_as<2>(leaf, ctx, results);
+        case 3: return scan_leaf_as<3>(leaf, ctx, results);
+        case 4: return scan_leaf_as<4>(leaf, ctx, results);
+        case 5: return scan_leaf_as<5>(leaf, ctx, results);
+        case 6: return scan_leaf_as<6>(leaf, ctx, results);
+        case 7: return scan_leaf_as<7>(leaf, ctx, results);
+        case 8: return scan_leaf_as<8>(leaf, ctx, results);
+        default: break;
+      }
+    }
+    scan_leaf_as<Dim>(leaf, ctx, results);
+  }
+
+  template <int D, class Results>
+  void scan_leaf_as(const Node& leaf, Context& ctx, Results& results) const {
+    const std::size_t d = D > 0 ? static_cast<std::size_t>(D) : dim();
     const std::size_t first = leaf.first(), count = leaf.count();
-    const T* p = points_.data() + first * dim();
+    const T* p = points_.data() + first * d;
     if (leaf.all_identical()) {
       // One distance serves all; the indices are ascending, so the first refusal ends the scan.
-      const T dist = internal_distance(metric_, ctx.q, p, dim());
-      ++ctx.stats->points_visited;
+      const T dist = internal_distance(metric_, ctx.q, p, d);
+      ++ctx.points_visited;
       for (std::size_t i = 0; i < count; ++i)
         if (!results.offer(dist, order_[first + i])) break;
       return;
     }
-    ctx.stats->points_visited += count;
-    for (std::size_t i = 0; i < count; ++i, p += dim())
-      results.offer(internal_distance(metric_, ctx.q, p, dim()), order_[first + i]);
+    ctx.points_visited += count;
+    // Most points are farther than the k-th kept: a comparison with the bound turns them away before
+    // the result set (and the original index) is touched. A tie with the bound may still enter.
+    T worst = results.bound();
+    for (std::size_t i = 0; i < count; ++i, p += d) {
+      const T dist = internal_distance(metric_, ctx.q, p, d);
+      if (dist <= worst) {
+        results.offer(dist, order_[first + i]);
+        worst = results.bound();
+      }
+    }
   }
 
   void radius_into(const T* q, T limit, std::size_t max_results, std::vector<detail::Candidate<T>>& out,
@@ -432,9 +471,10 @@ class PointTree {
         ++stats.queries;
         return;
       }
-      detail::KnnResults<T> results(max_results, limit, out);
-      run(q, results, SearchParams{}, stats);
-      results.sorted();
+      detail::with_knn_results(max_results, limit, out, [&](auto& results) {
+        run(q, results, SearchParams{}, stats);
+        results.sorted();
+      });
     } else {
       detail::RangeResults<T> results(limit, out);
       run(q, results, SearchParams{}, stats);
@@ -446,7 +486,11 @@ class PointTree {
   void scan_batch(const T* queries, std::size_t first, std::size_t last, std::size_t k, Neighbor<T>* out,
                   unsigned threads, std::vector<QueryStats>& per_worker) const {
     const std::size_t d = dim();
-    detail::parallel_for(last - first, threads, 64, [&](std::size_t begin, std::size_t end, unsigned worker) {
+    // One call of the scan per thread (at least 64 queries a call): each call converts every point
+    // once, so small calls would repeat that work.
+    const std::size_t workers = detail::resolve_threads(threads);
+    const std::size_t chunk = std::max<std::size_t>(64, (last - first + workers - 1) / workers);
+    detail::parallel_for(last - first, threads, chunk, [&](std::size_t begin, std::size_t end, unsigned worker) {
       const std::size_t q0 = first + begin, count = end - begin;
       if constexpr (std::is_same_v<Metric, L2>) {
         const detail::ScanData<T> data{points_.data(), order_.data(), size(), d, centre_.data()};
@@ -503,6 +547,35 @@ class PointTree {
     if (!stats) return;
     for (const auto& s : per_worker) *stats += s;
   }
+
+  // The queries [first, last) of a batch in the order a batch visits them: by the leaf each one's
+  // descent reaches first, so that consecutive queries search the same part of the tree and find its
+  // nodes and points in cache. Answered in any order a query's answer is the same; only the time
+  // differs: 1.75x the queries a second for 10-NN (1.5x for 1-NN) on 1e6 uniform 3-D points queried
+  // in random order, where the tree is far larger than the caches; a few percent on 1e5 points.
+  // Small batches keep their order.
+  std::vector<std::size_t> visit_order(const T* queries, std::size_t first, std::size_t last) const {
+    std::vector<std::size_t> visit(last - first);
+    if (last - first < locality_batch || last > UINT32_MAX) {
+      for (std::size_t i = 0; i < visit.size(); ++i) visit[i] = first + i;
+      return visit;
+    }
+    std::vector<std::uint64_t> keyed(last - first);  // leaf node id, then the query's number
+    for (std::size_t q = first; q < last; ++q) {
+      const T* x = queries + q * dim();
+      std::uint32_t id = 0;
+      while (!nodes_[id].is_leaf()) {
+        const Node& node = nodes_[id];
+        const T at = x[node.axis()];
+        id = at - node.left_max <= node.right_min - at ? id + 1 : node.right_child();  // as search() goes first
+      }
+      keyed[q - first] = (std::uint64_t{id} << 32) | q;
+    }
+    std::sort(keyed.begin(), keyed.end());
+    for (std::size_t i = 0; i < visit.size(); ++i) visit[i] = static_cast<std::uint32_t>(keyed[i]);  // low half: q
+    return visit;
+  }
+  static constexpr std::size_t locality_batch = 256;  // batches from this size on are reordered
 
   // Queries of a batch the tree answers before BatchMethod::automatic chooses.
   static constexpr std::size_t probe_queries = 16;

@@ -1,10 +1,13 @@
 // The blocked scan: exact L2 k-NN of many queries by scoring every point, for data where a kd-tree
 // would visit most leaves anyway (high dimensions, uniform data).
 //
-// Squared distances are first estimated as |x|^2 + |q|^2 - 2 x.q, with the dot products of a block
-// of points against a block of queries computed as one matrix product (Eigen, compiled in the
-// library: lib/points/blocked_scan.cpp), on coordinates centred on `centre` so that the norms stay
-// small. Each estimate a comes with a rigorous rounding bound m (the product's and the norms'
+// Points go through in blocks, each against every block of queries, as one matrix product
+// (lib/points/blocked_scan.cpp: a register-blocked kernel for AVX2, chosen at run time, or Eigen).
+// Small-integer data (bytes, SIFT descriptors; every coordinate of points and queries an integer
+// and the squared extents adding up to less than 2^24) is multiplied in 16-bit integers: the
+// distances |x|^2 + |q|^2 - 2 x.q are then exact, and equal to internal_distance() bit for bit.
+// Any other data gets estimates of the squared distances, on coordinates centred on `centre` so
+// that the norms stay small, each with a rigorous rounding bound m (the product's and the norms'
 // rounding, the centring's and that of internal_distance() itself), so that the exact internal
 // distance lies in [a - m, a + m]. A point is kept as a candidate unless a - m exceeds the k-th
 // smallest a + m seen so far; the candidates are then scored again with internal_distance() and

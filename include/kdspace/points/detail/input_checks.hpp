@@ -11,14 +11,15 @@
 
 namespace kdspace::detail {
 
-/// n points of `dim` coordinates, row-major: a positive dimension, 1 <= n < 2^30, every coordinate
-/// finite ("row R: coordinate A is not finite (v)", 1-based).
+/// n points of `dim` coordinates, row-major: a positive dimension, 1 <= n < 2^30, and (unless
+/// check_values is false) every coordinate finite ("row R: coordinate A is not finite (v)", 1-based).
 template <class T>
-void check_points(const T* rows, std::size_t n, std::size_t dim) {
+void check_points(const T* rows, std::size_t n, std::size_t dim, bool check_values = true) {
   if (dim == 0) throw Error("points have dimension 0");
   if (n == 0) throw Error("no points: the data is empty");
   if (n >= (std::size_t{1} << 30)) throw Error("too many points: " + std::to_string(n) + " (at most 2^30 - 1)");
   if (rows == nullptr) throw Error("points: null pointer");
+  if (!check_values) return;
   if constexpr (std::is_integral_v<T>) return;  // every value is finite
   for (std::size_t i = 0; i < n; ++i)
     for (std::size_t a = 0; a < dim; ++a)

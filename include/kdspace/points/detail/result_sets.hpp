@@ -70,6 +70,65 @@ class KnnResults {
   std::vector<Candidate<T>>& heap_;
 };
 
+/// The same as KnnResults for small k, kept as a sorted array: a new candidate is inserted by
+/// shifting the worse ones, and the bound is the last entry, read without a branch on the heap. For
+/// k up to small_k this beats the heap (fewer comparisons, no sift down at each insertion); beyond
+/// it the O(k) shifts would not.
+template <class T>
+class SortedKnnResults {
+ public:
+  static constexpr std::size_t small_k = 32;
+
+  SortedKnnResults(std::size_t k, T limit, std::vector<Candidate<T>>& storage)
+      : k_(k), limit_(limit), bound_(limit), kept_(storage) {
+    kept_.resize(k);
+  }
+
+  T bound() const { return bound_; }
+  bool full() const { return size_ == k_; }
+
+  bool offer(T dist, std::uint32_t index) {
+    const Candidate<T> c{dist, index};
+    std::size_t j = size_;
+    if (size_ < k_) {
+      if (!(dist <= limit_)) return false;
+      ++size_;
+    } else if (!comes_before(c, kept_[k_ - 1])) {
+      return false;
+    } else {
+      j = k_ - 1;
+    }
+    for (; j > 0 && comes_before(c, kept_[j - 1]); --j) kept_[j] = kept_[j - 1];
+    kept_[j] = c;
+    if (size_ == k_) bound_ = kept_[k_ - 1].dist;
+    return true;
+  }
+
+  std::vector<Candidate<T>>& sorted() {
+    kept_.resize(size_);
+    return kept_;
+  }
+
+ private:
+  std::size_t k_;
+  T limit_;
+  T bound_;
+  std::size_t size_ = 0;
+  std::vector<Candidate<T>>& kept_;
+};
+
+/// Calls f(results) with the k-NN result set that suits k: SortedKnnResults up to its small_k, else
+/// KnnResults. Both keep the same candidates.
+template <class T, class F>
+decltype(auto) with_knn_results(std::size_t k, T limit, std::vector<Candidate<T>>& storage, F&& f) {
+  if (k <= SortedKnnResults<T>::small_k) {
+    SortedKnnResults<T> results(k, limit, storage);
+    return f(results);
+  }
+  KnnResults<T> results(k, limit, storage);
+  return f(results);
+}
+
 /// Keeps every candidate with dist <= limit.
 template <class T>
 class RangeResults {
