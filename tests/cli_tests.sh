@@ -690,5 +690,11 @@ EOF
   fi
 fi
 
+# Without --out the demo writes nothing: run in an empty folder, the folder stays empty.
+mkdir -p demo-quiet
+if (cd demo-quiet && "$KDSPACE" demo --quick >../out.txt 2>&1) && [ -z "$(ls -A demo-quiet)" ]; then
+  pass "demo without --out writes nothing into the working folder"
+else fail "demo without --out writes nothing into the working folder" "$(ls -A demo-quiet)"; fi
+
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]
