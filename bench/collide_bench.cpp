@@ -70,6 +70,7 @@
 #include "kdspace/collide/moving_scene.hpp"
 #include "kdspace/collide/overlap.hpp"
 #include "kdspace/rays/scene_gen.hpp"
+#include "bench_args.hpp"
 #include "real_data/mesh_io.hpp"
 
 namespace {
@@ -116,23 +117,11 @@ struct Options {
   std::exit(2);
 }
 
-std::vector<std::string> split_list(const std::string& list) {
-  std::vector<std::string> items;
-  std::size_t pos = 0;
-  while (pos <= list.size()) {
-    const std::size_t end = std::min(list.find(',', pos), list.size());
-    if (end > pos) items.push_back(list.substr(pos, end - pos));
-    pos = end + 1;
-  }
-  return items;
-}
+using kdspace::bench::split_list;
 
 std::size_t parse_count(const std::string& text) {
-  char* end = nullptr;
-  const double value = std::strtod(text.c_str(), &end);
-  if (end == text.c_str() || *end != '\0' || !(value >= 1) || value > 1e9 || value != std::floor(value))
-    usage("not a positive whole number: " + text);
-  return static_cast<std::size_t>(value);
+  if (const auto count = kdspace::bench::positive_count(text, 1e9)) return *count;
+  usage("not a positive whole number: " + text);
 }
 
 Options parse(int argc, char** argv) {
