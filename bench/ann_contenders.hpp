@@ -92,6 +92,15 @@ struct AnnSetting {
   std::size_t a = 0, b = 0;
 };
 
+/// The search widths every graph index is swept over (kdspace's graph, hnswlib, FAISS HNSW), so
+/// their curves share their points; `name` is the library's word for it ("ef", "efSearch").
+inline std::vector<AnnSetting> ef_settings(const std::string& name) {
+  std::vector<AnnSetting> out;
+  for (std::size_t ef : {10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 64, 80, 96, 128, 192, 256, 384, 512})
+    out.push_back({name + " " + std::to_string(ef), ef, 0});
+  return out;
+}
+
 class Contender {
  public:
   virtual ~Contender() = default;
@@ -132,12 +141,7 @@ class KdspaceGraph : public Contender {
   KdspaceGraph() { name = "kdspace graph"; }
   void build(const AnnData& d, unsigned threads) override { make(d, threads, kdspace::GraphMode::on); }
   const kdspace::PointForest<float>& index() const { return *forest_; }
-  std::vector<AnnSetting> settings() const override {
-    std::vector<AnnSetting> out;
-    for (std::size_t ef : {10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 64, 80, 96, 128, 192, 256, 384, 512})
-      out.push_back({"ef " + std::to_string(ef), ef, 0});
-    return out;
-  }
+  std::vector<AnnSetting> settings() const override { return ef_settings("ef"); }
   double search(const AnnData& d, const AnnSetting& s, unsigned threads, std::vector<std::uint32_t>& ids) override {
     return run(d, kdspace::ForestSearchParams{kdspace::unlimited_checks, 0, s.a}, threads, ids);
   }
@@ -200,12 +204,7 @@ class Hnswlib : public Contender {
     for (auto& t : pool) t.join();
     build_s = timer.seconds();
   }
-  std::vector<AnnSetting> settings() const override {
-    std::vector<AnnSetting> out;
-    for (std::size_t ef : {10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 64, 80, 96, 128, 192, 256, 384, 512})
-      out.push_back({"ef " + std::to_string(ef), ef, 0});
-    return out;
-  }
+  std::vector<AnnSetting> settings() const override { return ef_settings("ef"); }
   double search(const AnnData& d, const AnnSetting& s, unsigned threads, std::vector<std::uint32_t>& ids) override {
     index_->setEf(s.a);
     ids.assign(d.nq() * ann_k, 0);
@@ -257,12 +256,7 @@ class FaissHnsw : public Contender {
     index_->add(static_cast<faiss::Index::idx_t>(d.n()), d.base.data());
     build_s = timer.seconds();
   }
-  std::vector<AnnSetting> settings() const override {
-    std::vector<AnnSetting> out;
-    for (std::size_t ef : {10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 64, 80, 96, 128, 192, 256, 384, 512})
-      out.push_back({"efSearch " + std::to_string(ef), ef, 0});
-    return out;
-  }
+  std::vector<AnnSetting> settings() const override { return ef_settings("efSearch"); }
   double search(const AnnData& d, const AnnSetting& s, unsigned threads, std::vector<std::uint32_t>& ids) override {
     index_->hnsw.efSearch = static_cast<int>(s.a);
     return faiss_search(*index_, d, threads, ids);

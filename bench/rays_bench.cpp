@@ -123,6 +123,7 @@
 #include "kdspace/error.hpp"
 #include "kdspace/rays/detail/slab.hpp"
 #include "kdspace/rays/scene_gen.hpp"
+#include "bench_args.hpp"
 #include "rays_scenes.hpp"
 
 namespace {
@@ -206,23 +207,11 @@ struct Options {
   std::exit(2);
 }
 
-std::vector<std::string> split_list(const std::string& list, char separator) {
-  std::vector<std::string> items;
-  std::size_t pos = 0;
-  while (pos <= list.size()) {
-    const std::size_t end = std::min(list.find(separator, pos), list.size());
-    if (end > pos) items.push_back(list.substr(pos, end - pos));
-    pos = end + 1;
-  }
-  return items;
-}
+using kdspace::bench::split_list;
 
 std::size_t parse_count(const std::string& text) {
-  char* end = nullptr;
-  const double value = std::strtod(text.c_str(), &end);
-  if (end == text.c_str() || *end != '\0' || !(value >= 1) || value > 1e12 || value != std::floor(value))
-    usage(("not a positive whole number: " + text).c_str());
-  return static_cast<std::size_t>(value);
+  if (const auto count = kdspace::bench::positive_count(text, 1e12)) return *count;
+  usage(("not a positive whole number: " + text).c_str());
 }
 
 Options parse(int argc, char** argv) {

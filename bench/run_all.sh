@@ -4,6 +4,7 @@
 #     the image descriptors, the Python peers)             -> bench/results/points.md, points.jsonl
 #   build/bench/bench/kdspace-rays-bench, when built       -> bench/results/rays.md, rays.jsonl
 #   build/bench/bench/kdspace-ann-bench                     -> bench/results/ann.md, ann.jsonl
+#   bench/run_collide.sh (kdspace-collide-bench), when built -> bench/results/collide.md, collide.jsonl
 #   bench/summary.py                                        -> bench/results/summary.md (points, ratios)
 #   bench/plot.sh                                           -> docs/bench_points.png, docs/bench_rays.png,
 #                                                              docs/bench_ann.png
@@ -17,7 +18,8 @@
 #              ann bench; default BUILD_DIR/photos, from Debian's python3-skimage package), AUDIO_DIR
 #              (the recordings for the ann bench; default BUILD_DIR/audio, from Debian's
 #              asterisk-core-sounds-en-wav and asc-music packages), REAL_DIR (the real scans for
-#              kdspace-bench; default BUILD_DIR/real_data, filled by bench/real_data/fetch.sh)
+#              kdspace-bench; default BUILD_DIR/real_data, filled by bench/real_data/fetch.sh),
+#              COLLIDE_BENCH_ARGS (options for kdspace-collide-bench; the meshes: see run_collide.sh)
 #
 # Build first: cmake --preset bench && cmake --build build/bench -j2
 # Each bench's stdout is kept whole in bench/results/*.log; its JSON lines go to *.jsonl, the rest
@@ -33,6 +35,7 @@ plots=${PLOT_DIR:-$root/docs}
 points_bench=$build/bench/kdspace-bench
 rays_bench=$build/bench/kdspace-rays-bench
 ann_bench=$build/bench/kdspace-ann-bench
+collide_bench=$build/bench/kdspace-collide-bench
 mkdir -p "$results"
 
 if [ ! -x "$points_bench" ]; then
@@ -131,6 +134,11 @@ if [ -d "$audio/speech" ] && [ -d "$audio/music" ]; then ann_args+=(--audio "$au
 if [ -x "$ann_bench" ]; then
   # shellcheck disable=SC2086  # ANN_BENCH_ARGS is a list of options
   run_bench ann "$ann_bench" "${ann_args[@]}" ${ANN_BENCH_ARGS:-}
+fi
+
+if [ -x "$collide_bench" ]; then
+  # shellcheck disable=SC2086  # COLLIDE_BENCH_ARGS is a list of options
+  BUILD_DIR=$build RESULTS_DIR=$results "$here/run_collide.sh" ${COLLIDE_BENCH_ARGS:-} || status=1
 fi
 
 python3 "$here/summary.py" "$results/points.jsonl" > "$results/summary.md" || status=1

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "kdspace/io/index.hpp"
+#include "kdspace/io/pairs.hpp"
 #include "kdspace/io/scene.hpp"
 #include "kdspace/io/vectors.hpp"
 #include "kdspace/rays/scene_gen.hpp"
@@ -92,6 +93,8 @@ int main(int argc, char** argv) {
     const auto rays = kdspace::random_rays(5, kdspace::Box3f{{0, 0, 0}, {1, 1, 1}}, 2);
     io::write_rays(seed("rays", "a.rays"), rays);
     io::write_hits(seed("hits", "a.hits"), kdspace::BoxTree(boxes).closest_hit_batch(rays));
+    io::write_pairs(seed("pairs", "empty.pairs"), std::vector<kdspace::IndexPair>{});
+    io::write_pairs(seed("pairs", "three.pairs"), std::vector<kdspace::IndexPair>{{0, 1}, {0, 2}, {3, 1}});
 
     const std::string tmp = (root / "saved.kdx").string();
     const auto p3 = points(24, 3);

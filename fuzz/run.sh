@@ -3,7 +3,7 @@
 # seed corpus the build writes (kdspace-fuzz-seeds) and from what earlier runs kept.
 #
 #   usage: fuzz/run.sh BUILD_DIR SECONDS_PER_TARGET [TARGET...]      (targets: fvecs ivecs bvecs csv
-#                                                          npy boxes rays hits index read_part)
+#                                                          npy boxes rays hits pairs index read_part)
 #   e.g.   cmake --preset fuzz && cmake --build --preset fuzz -j2 --target kdspace_fuzz &&
 #          fuzz/run.sh build/fuzz 25                     (CI: 25 s each)
 #          fuzz/run.sh build/fuzz 3600 index             (a long run of one target)
@@ -20,7 +20,7 @@ build=$(cd "$1" && pwd)/fuzz
 seconds=$2
 shift 2
 targets=("$@")
-[ ${#targets[@]} -eq 0 ] && targets=(fvecs ivecs bvecs csv npy boxes rays hits index read_part)
+[ ${#targets[@]} -eq 0 ] && targets=(fvecs ivecs bvecs csv npy boxes rays hits pairs index read_part)
 
 "$build/kdspace-fuzz-seeds" "$build/seeds" || { echo "fuzz: could not write the seeds" >&2; exit 1; }
 mkdir -p "$build/findings"

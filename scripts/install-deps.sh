@@ -14,6 +14,7 @@ packages=(
   libsndfile1-dev                                            # recordings for kdspace-ann-bench's MFCC
   libcgal-dev libopenblas-dev                                # kdspace-bench peers: CGAL Kd_tree, FAISS flat (OpenBLAS sgemm)
   clang libclang-rt-14-dev                                   # fuzzing (libFuzzer): fuzz/
+  libbullet-dev                                              # collision benchmark peer (CGAL: collision tests)
   gnuplot-nox                                                # benchmark plots
   pybind11-dev python3-dev python3-numpy                     # the Python module (python/)
   python3-scipy python3-pytest                               # its tests (SciPy's kd-tree tests run against it)

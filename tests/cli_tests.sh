@@ -635,7 +635,7 @@ else fail "--version prints kdspace X.Y.Z" "stdout: $(cat out.txt)"; fi
 if expect_ok "--help" --help && grep -qF "kdspace knn" out.txt && grep -qF "kdspace radius" out.txt && grep -qF -- "-k 0" out.txt; then
   pass "--help prints the usage (with the rule for -k 0)"
 else fail "--help prints the usage (with the rule for -k 0)" "stdout: $(head -c 300 out.txt)"; fi
-for cmd in knn radius demo pairs count index; do
+for cmd in knn radius demo pairs count overlaps index; do
   if expect_ok "$cmd --help" $cmd --help && grep -qF "usage: kdspace $cmd" out.txt; then pass "$cmd --help"
   else fail "$cmd --help" "stdout: $(head -c 300 out.txt)"; fi
 done
@@ -690,6 +690,95 @@ if expect_ok "render" render --boxes scene.boxes --out scene.png --width 64 --he
 fi
 expect_error "render: width 0" 2 "--width" -- render --boxes scene.boxes --out scene.png --width 0
 
+# ---- overlaps ------------------------------------------------------------------------------------
+python3 - <<'EOF'
+import random, struct
+def boxes(path, items):
+    with open(path, "wb") as f:
+        f.write(struct.pack("<Q", len(items)))
+        for b in items: f.write(struct.pack("<6f", *b))
+rng = random.Random(3)
+# Cubes of side 1 or 2 on an integer grid: many share faces, edges and corners exactly.
+def grid(n):
+    out = []
+    for _ in range(n):
+        s = rng.choice((1, 1, 2))
+        x, y, z = (rng.randint(0, 9) for _ in range(3))
+        out.append((x, y, z, x + s, y + s, z + s))
+    return out
+boxes("grid_a.boxes", grid(400))
+boxes("grid_b.boxes", grid(150))
+# Random boxes of mixed sizes, some flat.
+mixed = []
+for i in range(600):
+    lo = [rng.uniform(-5, 5) for _ in range(3)]
+    hi = [v + rng.choice((0.0, rng.uniform(0, 1.5))) for v in lo]
+    mixed.append(tuple(lo + hi))
+boxes("mixed.boxes", mixed)
+boxes("none.boxes", [])
+boxes("nan.boxes", [(0,0,0,1,1,1), (0,float("nan"),0,1,1,1)])
+boxes("inverted.boxes", [(0,0,0,1,1,1), (0,0,0,1,1,1), (0,0,2,1,1,1)])
+open("cut.boxes", "wb").write(struct.pack("<Q", 3) + b"\0" * 50)
+open("zero_bytes.boxes", "wb").close()
+EOF
+# check_pairs A [B]: out.pairs equals the brute-force pairs of A (a < b) or of A x B.
+check_pairs() {
+  python3 - "$@" <<'EOF'
+import struct, sys
+def read_boxes(path):
+    d = open(path, "rb").read()
+    (n,) = struct.unpack_from("<Q", d)
+    return [struct.unpack_from("<6f", d, 8 + 24 * i) for i in range(n)]
+def overlap(p, q):
+    return all(p[k] <= q[k + 3] and q[k] <= p[k + 3] for k in range(3))
+a = read_boxes(sys.argv[1])
+b = read_boxes(sys.argv[2]) if len(sys.argv) > 2 else None
+if b is None:
+    want = [(i, j) for i in range(len(a)) for j in range(i + 1, len(a)) if overlap(a[i], a[j])]
+else:
+    want = [(i, j) for i in range(len(a)) for j in range(len(b)) if overlap(a[i], b[j])]
+d = open("out.pairs", "rb").read()
+(m,) = struct.unpack_from("<Q", d)
+assert len(d) == 8 + 8 * m, (m, len(d))
+got = [struct.unpack_from("<II", d, 8 + 8 * i) for i in range(m)]
+assert got == want, "got %d pairs, brute force %d; first difference at %s" % (
+    len(got), len(want), next((k for k, (x, y) in enumerate(zip(got, want)) if x != y), min(len(got), len(want))))
+EOF
+}
+for build in binned sah-nlogn sah median; do
+  for set in grid_a mixed; do
+    name="overlaps --build $build on $set"
+    if expect_ok "$name" overlaps --boxes $set.boxes --out out.pairs --build $build; then
+      if check_pairs $set.boxes 2>check.txt; then pass "$name: the brute-force pairs"; else fail "$name" "$(cat check.txt)"; fi
+    fi
+  done
+done
+if expect_ok "overlaps --with" overlaps --boxes grid_a.boxes --with grid_b.boxes --out out.pairs --threads 3; then
+  if check_pairs grid_a.boxes grid_b.boxes 2>check.txt; then pass "overlaps --with: the brute-force pairs"; else fail "overlaps --with" "$(cat check.txt)"; fi
+fi
+if expect_ok "overlaps --stats" overlaps --boxes mixed.boxes --out out.pairs --stats --threads 2; then
+  if python3 -c '
+import json
+s = json.load(open("out.txt"))
+for key in ("build_s", "query_s", "pairs", "threads", "depth", "leaves"): assert key in s, key
+assert s["threads"] == 2 and s["boxes"] == 600, s' 2>check.txt; then pass "overlaps --stats keys"; else fail "overlaps --stats keys" "$(cat check.txt)"; fi
+fi
+if expect_ok "overlaps on 0 boxes" overlaps --boxes none.boxes --with grid_b.boxes --out out.pairs; then
+  if check_pairs none.boxes grid_b.boxes 2>check.txt && [ "$(wc -c < out.pairs)" -eq 8 ]; then pass "overlaps on 0 boxes: an empty pairs file"
+  else fail "overlaps on 0 boxes: an empty pairs file" "$(cat check.txt)"; fi
+fi
+expect_error "overlaps: NaN coordinate" 1 "nan.boxes: box 2: min y is nan" -- overlaps --boxes nan.boxes --out out.pairs
+expect_error "overlaps: min > max" 1 "inverted.boxes: box 3: min z 2 > max z 1" -- overlaps --boxes inverted.boxes --out out.pairs
+expect_error "overlaps: truncated file" 1 "cut.boxes: truncated" -- overlaps --boxes grid_a.boxes --with cut.boxes --out out.pairs
+expect_error "overlaps: empty file" 1 "zero_bytes.boxes: empty file" -- overlaps --boxes zero_bytes.boxes --out out.pairs
+expect_error "overlaps: missing --out" 2 "--out" -- overlaps --boxes grid_a.boxes
+expect_error "overlaps: unknown build" 2 "--build" -- overlaps --boxes grid_a.boxes --out out.pairs --build octree
+expect_error "overlaps: no output folder" 1 "no/such/out.pairs" -- overlaps --boxes grid_a.boxes --out no/such/out.pairs
+rm -f out.pairs
+run overlaps --boxes nan.boxes --out out.pairs
+if [ ! -e out.pairs ] && ! ls | grep -qF '.tmp-'; then pass "overlaps: a failed run leaves no output and no temporary"
+else fail "overlaps: a failed run leaves no output and no temporary" "$(ls)"; fi
+
 # ---- demo ----------------------------------------------------------------------------------------
 if expect_ok "demo --quick" demo --quick --out demo-out; then
   if python3 - <<'EOF' 2>check.txt; then pass "demo --quick: exact is yes everywhere"; else fail "demo --quick: exact is yes everywhere" "$(cat check.txt)"; fi
@@ -712,6 +801,12 @@ EOF
     then pass "knn on the demo's files"; else fail "knn on the demo's files" "$(cat check.txt)"; fi
   fi
 fi
+
+# Without --out the demo writes nothing: run in an empty folder, the folder stays empty.
+mkdir -p demo-quiet
+if (cd demo-quiet && "$KDSPACE" demo --quick >../out.txt 2>&1) && [ -z "$(ls -A demo-quiet)" ]; then
+  pass "demo without --out writes nothing into the working folder"
+else fail "demo without --out writes nothing into the working folder" "$(ls -A demo-quiet)"; fi
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

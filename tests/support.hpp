@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -19,6 +20,7 @@
 #include "kdspace/points/brute_force.hpp"
 #include "kdspace/points/point_tree.hpp"
 #include "kdspace/boxes/box_tree.hpp"
+#include "kdspace/rays/scene_gen.hpp"
 
 namespace kdspace_test {
 
@@ -213,6 +215,107 @@ inline kdspace::Box3f box_of(float x0, float y0, float z0, float x1, float y1, f
   b.lo = {x0, y0, z0};
   b.hi = {x1, y1, z1};
   return b;
+}
+
+// ---- collision scenes (test_collide*.cpp) -------------------------------------------------------
+
+enum class CollisionScene { uniform, clustered, overlapping, flat, face_sharing, mixed_sizes, identical, points };
+
+inline const char* name(CollisionScene s) {
+  switch (s) {
+    case CollisionScene::uniform:
+      return "uniform";
+    case CollisionScene::clustered:
+      return "clustered";
+    case CollisionScene::overlapping:
+      return "heavily overlapping";
+    case CollisionScene::flat:
+      return "flat and coplanar";
+    case CollisionScene::face_sharing:
+      return "face-sharing cubes";
+    case CollisionScene::mixed_sizes:
+      return "mixed sizes";
+    case CollisionScene::identical:
+      return "all identical";
+    case CollisionScene::points:
+      return "points on a grid";
+  }
+  return "?";
+}
+
+inline const CollisionScene all_collision_scenes[] = {
+    CollisionScene::uniform,      CollisionScene::clustered,   CollisionScene::overlapping,
+    CollisionScene::flat,         CollisionScene::face_sharing, CollisionScene::mixed_sizes,
+    CollisionScene::identical,    CollisionScene::points};
+
+/// n boxes of the given kind; the same seed gives the same boxes.
+///   uniform, clustered   the ray module's generated scenes (a few overlaps a box)
+///   overlapping          boxes a third of the scene wide: every box overlaps a large share of the rest
+///   flat                 boxes of zero thickness on one axis, on coarse grid coordinates: many
+///                        coplanar, touching along faces and edges, lying in each other's planes
+///   face_sharing         cubes of side 1 or 2 at integer positions: neighbours share faces, edges,
+///                        corners exactly
+///   mixed_sizes          sizes over three orders of magnitude
+///   identical            one box n times
+///   points               zero-size boxes on a small integer grid: many coincide
+inline std::vector<kdspace::Box3f> make_collision_scene(CollisionScene kind, std::size_t n, std::uint32_t seed) {
+  Rng rng(seed);
+  std::vector<kdspace::Box3f> boxes(n);
+  switch (kind) {
+    case CollisionScene::uniform:
+      return kdspace::generate_boxes(n, kdspace::SceneKind::uniform, seed);
+    case CollisionScene::clustered:
+      return kdspace::generate_boxes(n, kdspace::SceneKind::clustered, seed);
+    case CollisionScene::overlapping:
+      for (kdspace::Box3f& b : boxes)
+        for (int a = 0; a < 3; ++a) {
+          b.lo[a] = uniform(rng, 0, 0.7f);
+          b.hi[a] = b.lo[a] + uniform(rng, 0.1f, 0.3f);
+        }
+      break;
+    case CollisionScene::flat: {
+      const int cells = std::max(2, static_cast<int>(std::cbrt(static_cast<double>(n))));
+      for (kdspace::Box3f& b : boxes) {
+        const int flat_axis = uniform_int(rng, 0, 2);
+        for (int a = 0; a < 3; ++a) {
+          b.lo[a] = 0.25f * static_cast<float>(uniform_int(rng, 0, 4 * cells));
+          b.hi[a] = a == flat_axis ? b.lo[a] : b.lo[a] + 0.25f * static_cast<float>(uniform_int(rng, 1, 6));
+        }
+      }
+      break;
+    }
+    case CollisionScene::face_sharing: {
+      const int cells = std::max(2, static_cast<int>(std::cbrt(static_cast<double>(n)) * 1.3));
+      for (kdspace::Box3f& b : boxes) {
+        const float side = uniform_int(rng, 0, 3) == 0 ? 2.0f : 1.0f;
+        for (int a = 0; a < 3; ++a) {
+          b.lo[a] = static_cast<float>(uniform_int(rng, 0, cells));
+          b.hi[a] = b.lo[a] + side;
+        }
+      }
+      break;
+    }
+    case CollisionScene::mixed_sizes:
+      for (kdspace::Box3f& b : boxes) {
+        const float scale = std::pow(10.0f, uniform(rng, -2, 1));
+        for (int a = 0; a < 3; ++a) {
+          b.lo[a] = uniform(rng, -10, 10);
+          b.hi[a] = b.lo[a] + scale * uniform(rng, 0.05f, 1);
+        }
+      }
+      break;
+    case CollisionScene::identical: {
+      const kdspace::Box3f one = box_of(0.5f, -1, 2, 1.5f, 0, 2.25f);
+      std::fill(boxes.begin(), boxes.end(), one);
+      break;
+    }
+    case CollisionScene::points:
+      for (kdspace::Box3f& b : boxes) {
+        for (int a = 0; a < 3; ++a) b.lo[a] = b.hi[a] = static_cast<float>(uniform_int(rng, 0, 7));
+      }
+      break;
+  }
+  return boxes;
 }
 
 // ---- files (test_io.cpp, test_rays_io.cpp) ------------------------------------------------------

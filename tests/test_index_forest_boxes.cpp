@@ -2,6 +2,7 @@
 // the same answers; every changed byte is a clear error; resealed changes never make a query read out
 // of bounds (ASan runs these too).
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -181,8 +182,8 @@ TEST_CASE("index: a saved box tree loads with the same nodes, statistics and hit
   const auto boxes = kdspace::generate_boxes(2000, kdspace::SceneKind::clustered, 7);
   kdspace::Box3f bounds{{0, 0, 0}, {1, 1, 1}};
   const auto rays = kdspace::random_rays(2000, bounds, 8);
-  for (auto method :
-       {kdspace::BoxBuildMethod::median, kdspace::BoxBuildMethod::sah, kdspace::BoxBuildMethod::sah_nlogn}) {
+  for (auto method : {kdspace::BoxBuildMethod::median, kdspace::BoxBuildMethod::sah,
+                      kdspace::BoxBuildMethod::sah_nlogn, kdspace::BoxBuildMethod::binned}) {
     kdspace::BoxBuildParams params;
     params.method = method;
     const BoxTree built(boxes, params);
@@ -208,6 +209,54 @@ TEST_CASE("index: a saved box tree loads with the same nodes, statistics and hit
   // An empty tree too.
   io::save(tmp.file("empty.kdx"), BoxTree(std::vector<kdspace::Box3f>{}));
   REQUIRE(io::load_box_tree(tmp.file("empty.kdx")).closest_hit(rays[0]).box == kdspace::Hit::none);
+}
+
+// A refitted tree's root cell keeps the cells its planes were made in, so it is saved with the tree;
+// a tree loaded mapped can be refitted (it copies its arrays then), and neither the file nor the
+// answers of another tree loaded from it change.
+TEST_CASE("index: box trees refitted before saving and after a mapped load", "[index][boxes]") {
+  kdspace_test::ScratchDir tmp("kdspace-index-refit-", true);
+  auto boxes = kdspace::generate_boxes(1500, kdspace::SceneKind::clustered, 11);
+  const auto rays = kdspace::random_rays(1500, kdspace::Box3f{{-0.5f, -0.5f, -0.5f}, {1.5f, 1.5f, 1.5f}}, 12);
+  auto shifted = [](std::vector<kdspace::Box3f> b, float by) {
+    for (std::size_t i = 0; i < b.size(); i += 3)
+      for (int a = 0; a < 3; ++a) {
+        b[i].lo[a] -= by;
+        b[i].hi[a] -= by;
+      }
+    return b;
+  };
+  auto same_hits = [&](const BoxTree& x, const BoxTree& y) {
+    const auto a = x.closest_hit_batch(rays, 1), b = y.closest_hit_batch(rays, 1);
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      REQUIRE(a[i].box == b[i].box);
+      REQUIRE(a[i].t == b[i].t);
+    }
+  };
+  kdspace::BoxBuildParams params;
+  params.method = kdspace::BoxBuildMethod::binned;
+  BoxTree tree(boxes, params);
+  const auto moved = shifted(boxes, 0.25f);  // some boxes leave the old root cell
+  REQUIRE(tree.refit(moved.data(), moved.size()));
+  const std::string path = tmp.file("refitted.kdx");
+  io::save(path, tree);
+  const BoxTree loaded = io::load_box_tree(path);
+  REQUIRE(loaded.bounds().lo == tree.bounds().lo);
+  REQUIRE(loaded.bounds().hi == tree.bounds().hi);
+  REQUIRE(loaded.nodes() == tree.nodes());
+  same_hits(loaded, tree);
+  same_hits(loaded, BoxTree(moved));  // and the refitted tree answers as a fresh build
+
+  // Refit a mapped tree: back to the first boxes, all of them, then one in three only.
+  BoxTree mapped = io::load_box_tree(path, io::LoadMode::map);
+  REQUIRE(mapped.refit(boxes.data(), boxes.size()));
+  same_hits(mapped, BoxTree(boxes));
+  BoxTree mapped_again = io::load_box_tree(path, io::LoadMode::map);
+  std::vector<std::uint32_t> ids;
+  for (std::uint32_t i = 0; i < boxes.size(); i += 3) ids.push_back(i);
+  REQUIRE(mapped_again.refit(boxes.data(), ids.data(), ids.size()));
+  same_hits(mapped_again, BoxTree(boxes));
+  same_hits(io::load_box_tree(path), tree);  // the file is unchanged
 }
 
 TEST_CASE("index: box tree files: every changed byte is an error, resealed changes are safe",
@@ -241,6 +290,7 @@ kdspace::BoxTreeParts owned_parts(const BoxTree& tree) {
   p.references =
       kdspace::detail::Storage<std::uint32_t>({borrowed.references.begin(), borrowed.references.end()});
   p.blocks = kdspace::detail::Storage<kdspace::LeafBlock>({borrowed.blocks.begin(), borrowed.blocks.end()});
+  p.bounds = borrowed.bounds;
   return p;
 }
 
@@ -274,6 +324,10 @@ TEST_CASE("index: box tree parts: padding, order, blocks and depth are checked",
   REQUIRE(again.nodes() == tree.nodes());
   REQUIRE(again.stats().sah_cost == tree.stats().sah_cost);
   REQUIRE(again.bounds().lo == tree.bounds().lo);
+  // A root cell that does not hold every box.
+  kdspace::BoxTreeParts shrunk = owned_parts(tree);
+  shrunk.bounds.hi[1] = std::nextafter(shrunk.bounds.hi[1], 0.0f);
+  REQUIRE_THROWS_WITH(BoxTree(std::move(shrunk)), Catch::Contains("lies outside the bounds"));
 
   // The first leaf of at least 2 boxes whose count is not a multiple of 4 (so that it has padding).
   std::size_t leaf = 0;

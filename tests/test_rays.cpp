@@ -258,6 +258,9 @@ std::vector<NamedParams> all_builds() {
   p = BoxBuildParams{};
   p.max_depth = 3;
   builds.push_back({"sah_nlogn max depth 3", p});
+  p = BoxBuildParams{};
+  p.method = BoxBuildMethod::binned;
+  builds.push_back({"binned", p});
   return builds;
 }
 

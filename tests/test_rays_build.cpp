@@ -161,7 +161,7 @@ TEST_CASE("rays build: sah and sah_nlogn without binning build identical trees",
 
 TEST_CASE("rays build: the tree does not depend on the number of build threads", "[rays][threads]") {
   const std::vector<Box3f> boxes = kdspace::generate_boxes(30000, kdspace::SceneKind::clustered, 3);
-  for (const BoxBuildMethod m : {BoxBuildMethod::median, BoxBuildMethod::sah, BoxBuildMethod::sah_nlogn}) {
+  for (const BoxBuildMethod m : {BoxBuildMethod::median, BoxBuildMethod::sah, BoxBuildMethod::sah_nlogn, BoxBuildMethod::binned}) {
     BoxBuildParams p;
     p.method = m;
     p.threads = 1;
@@ -181,7 +181,7 @@ TEST_CASE("rays build: every build makes a well-formed tree", "[rays]") {
       kdspace::generate_boxes(2000, kdspace::SceneKind::clustered, 4),
       std::vector<Box3f>(20, box_of(2, 2, 2, 2, 2, 2))};
   for (const auto& boxes : scenes)
-    for (const BoxBuildMethod m : {BoxBuildMethod::median, BoxBuildMethod::sah, BoxBuildMethod::sah_nlogn})
+    for (const BoxBuildMethod m : {BoxBuildMethod::median, BoxBuildMethod::sah, BoxBuildMethod::sah_nlogn, BoxBuildMethod::binned})
       for (const auto position : {kdspace::MedianPosition::middle, kdspace::MedianPosition::object_median}) {
         BoxBuildParams p;
         p.method = m;
@@ -265,7 +265,7 @@ TEST_CASE("rays build: hostile input stays small: identical boxes, points, huge 
                                                line_points,
                                                {box_of(0, 0, 0, 0, 0, 0)}};
   for (std::size_t s = 0; s < scenes.size(); ++s)
-    for (const BoxBuildMethod m : {BoxBuildMethod::median, BoxBuildMethod::sah, BoxBuildMethod::sah_nlogn})
+    for (const BoxBuildMethod m : {BoxBuildMethod::median, BoxBuildMethod::sah, BoxBuildMethod::sah_nlogn, BoxBuildMethod::binned})
       for (const auto probability :
            {kdspace::HitProbability::surface_area, kdspace::HitProbability::volume}) {
         INFO("scene " << s << ", method " << static_cast<int>(m));

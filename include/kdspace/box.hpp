@@ -16,8 +16,17 @@ struct Box {
       if (!(lo[a] <= p[a] && p[a] <= hi[a])) return false;
     return true;
   }
+
+  /// True when the closed boxes share a point: touching faces, edges or corners count.
+  bool overlaps(const Box& other) const {
+    for (int a = 0; a < D; ++a)
+      if (!(lo[a] <= other.hi[a] && other.lo[a] <= hi[a])) return false;
+    return true;
+  }
 };
 
 using Box3f = Box<float, 3>;
+/// A 3-D vector of floats: a displacement (the motion of a moving box).
+using Vec3f = std::array<float, 3>;
 
 }  // namespace kdspace

@@ -40,7 +40,8 @@ void check_params(const BoxBuildParams& p) {
   if (p.max_depth > max_box_tree_depth)
     throw Error("max_depth must be at most " + std::to_string(max_box_tree_depth) + ", got " +
                 std::to_string(p.max_depth));
-  if (p.method == BoxBuildMethod::median && p.leaf_size == 0) throw Error("leaf_size must be at least 1");
+  if (p.method != BoxBuildMethod::sah && p.method != BoxBuildMethod::sah_nlogn && p.leaf_size == 0)
+    throw Error("leaf_size must be at least 1");
   if (!(p.max_references_per_box >= 1) || std::isinf(p.max_references_per_box))
     throw Error("max_references_per_box must be a finite number >= 1, got " +
                 number(p.max_references_per_box));
@@ -76,11 +77,9 @@ std::string ray_problem(const Ray& ray) {
   return {};
 }
 
-BoxTree::BoxTree(const std::vector<Box3f>& boxes, const BoxBuildParams& params)
-    : BoxTree(boxes.data(), boxes.size(), params) {}
+namespace detail {
 
-BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params) : params_(params) {
-  check_params(params);
+void check_boxes(const Box3f* boxes, std::size_t n) {
   // Every box is referenced by at least one leaf, and references are counted in 30 bits.
   if (n >= (std::size_t{1} << 30))
     throw Error("too many boxes: " + std::to_string(n) + " (at most 2^30 - 1)");
@@ -89,6 +88,16 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
     const std::string problem = box_problem(boxes[i]);
     if (!problem.empty()) throw Error("box " + std::to_string(i + 1) + ": " + problem);
   }
+}
+
+}  // namespace detail
+
+BoxTree::BoxTree(const std::vector<Box3f>& boxes, const BoxBuildParams& params)
+    : BoxTree(boxes.data(), boxes.size(), params) {}
+
+BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params) : params_(params) {
+  check_params(params);
+  detail::check_boxes(boxes, n);
 
   const auto start = std::chrono::steady_clock::now();
   std::vector<Box3f> copy(boxes, boxes + n);
@@ -110,6 +119,9 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
       case BoxBuildMethod::sah_nlogn:
         detail::build_sah_nlogn(copy, bounds_, params, max_depth, out);
         break;
+      case BoxBuildMethod::binned:
+        detail::build_binned(copy, bounds_, params, max_depth, out);
+        break;
     }
   }
   detail::TreeLayout layout = detail::lay_out(out, copy);
@@ -123,15 +135,22 @@ BoxTree::BoxTree(const Box3f* boxes, std::size_t n, const BoxBuildParams& params
 }
 
 void BoxTree::compute_bounds() {
+  Box3f all;
   for (int a = 0; a < 3; ++a) {
-    bounds_.lo[a] = std::numeric_limits<float>::infinity();
-    bounds_.hi[a] = -std::numeric_limits<float>::infinity();
+    all.lo[a] = std::numeric_limits<float>::infinity();
+    all.hi[a] = -std::numeric_limits<float>::infinity();
   }
   for (const Box3f& b : boxes_)
     for (int a = 0; a < 3; ++a) {
-      bounds_.lo[a] = std::min(bounds_.lo[a], b.lo[a]);
-      bounds_.hi[a] = std::max(bounds_.hi[a], b.hi[a]);
+      all.lo[a] = std::min(all.lo[a], b.lo[a]);
+      all.hi[a] = std::max(all.hi[a], b.hi[a]);
     }
+  set_bounds(all);
+}
+
+void BoxTree::set_bounds(const Box3f& bounds) {
+  bounds_ = bounds;
+  float_range_ = true;
   for (int a = 0; a < 3; ++a)
     if (!(std::abs(bounds_.lo[a]) <= float_trace_limit && std::abs(bounds_.hi[a]) <= float_trace_limit))
       float_range_ = false;
@@ -205,6 +224,15 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
     stack.push_back({at.id + 1, at.id, at.depth + 1});
   }
   if (next != p.nodes.size() || next_ref != refs) fail("nodes or references not reached from the root");
+  // The root cell: the union of the boxes, or more after a refit (it keeps the cells the planes were
+  // made in); it must hold every box.
+  if (n > 0) {
+    if (!box_problem(p.bounds).empty()) fail("bounds: " + box_problem(p.bounds));
+    for (std::size_t i = 0; i < n; ++i)
+      for (int a = 0; a < 3; ++a)
+        if (!(p.bounds.lo[a] <= p.boxes[i].lo[a] && p.boxes[i].hi[a] <= p.bounds.hi[a]))
+          fail("box " + std::to_string(i + 1) + " lies outside the bounds");
+  }
   // Every box meets the root cell (the union of the boxes), so some leaf holds it.
   for (std::size_t i = 0; i < n; ++i)
     if (!referenced[i]) fail("box " + std::to_string(i + 1) + " is in no leaf");
@@ -213,7 +241,10 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
   references_ = std::move(p.references);
   blocks_ = std::move(p.blocks);
   backing_ = std::move(p.backing);
-  compute_bounds();
+  if (n > 0)
+    set_bounds(p.bounds);
+  else
+    compute_bounds();
   stats_.depth = depth;
   stats_.max_depth = p.max_depth;
   compute_stats();
@@ -227,19 +258,30 @@ BoxTreeParts BoxTree::parts() const {
   p.nodes = detail::Storage<BoxNode>::borrow(nodes_.data(), nodes_.size());
   p.references = detail::Storage<std::uint32_t>::borrow(references_.data(), references_.size());
   p.blocks = detail::Storage<LeafBlock>::borrow(blocks_.data(), blocks_.size());
+  p.bounds = bounds_;
   p.backing = backing_;
   return p;
 }
 
-void BoxTree::compute_stats() {
+void BoxTree::count_leaves() {
   stats_.boxes = boxes_.size();
   stats_.nodes = nodes_.size();
   stats_.references = 0;
   stats_.leaves = stats_.empty_leaves = stats_.max_leaf_size = 0;
-  if (boxes_.empty()) {
-    stats_.leaves = stats_.empty_leaves = 1;
-    return;
-  }
+  for (const BoxNode& node : nodes_)
+    if (node.is_leaf()) {
+      ++stats_.leaves;
+      stats_.references += node.count();
+      stats_.empty_leaves += node.count() == 0 ? 1 : 0;
+      stats_.max_leaf_size = std::max<std::size_t>(stats_.max_leaf_size, node.count());
+    }
+  stats_.references_per_box =
+      boxes_.empty() ? 0 : static_cast<double>(stats_.references) / static_cast<double>(boxes_.size());
+}
+
+void BoxTree::compute_stats() {
+  count_leaves();
+  if (boxes_.empty()) return;
   // Walk the tree with each node's cell to weigh it by P(cell | scene) (the SAH tree cost, W&H 2006).
   const detail::CellMeasure measure(HitProbability::surface_area, bounds_);
   const double whole = measure.whole();
@@ -255,10 +297,6 @@ void BoxTree::compute_stats() {
     const BoxNode& node = nodes_[item.node];
     const double p = whole > 0 ? measure(item.cell) / whole : 1.0;
     if (node.is_leaf()) {
-      ++stats_.leaves;
-      stats_.references += node.count();
-      stats_.empty_leaves += node.count() == 0 ? 1 : 0;
-      stats_.max_leaf_size = std::max<std::size_t>(stats_.max_leaf_size, node.count());
       cost += static_cast<double>(params_.K_i) * detail::box_tests(node.count()) * p;
     } else {
       cost += static_cast<double>(params_.K_t) * p;
@@ -270,7 +308,6 @@ void BoxTree::compute_stats() {
     }
   }
   stats_.sah_cost = cost;
-  stats_.references_per_box = static_cast<double>(stats_.references) / static_cast<double>(boxes_.size());
 }
 
 }  // namespace kdspace

@@ -230,6 +230,10 @@ void build_subtree(const Method& method, typename Method::Work work, const Box3f
   }
 }
 
+/// Throws Error for n >= 2^30 (references are counted in 30 bits), a null pointer, or the first box
+/// that is not finite or has min > max ("box 17: min x 3 > max x 1", 1-based).
+void check_boxes(const Box3f* boxes, std::size_t n);
+
 /// The reference budget of the root.
 inline double root_budget(const BoxBuildParams& params, std::size_t n) {
   return static_cast<double>(params.max_references_per_box) * static_cast<double>(n);
@@ -240,7 +244,7 @@ inline unsigned build_threads(const BoxBuildParams& params) {
   return params.threads == 0 ? std::max(1u, std::thread::hardware_concurrency()) : params.threads;
 }
 
-// ---- the three methods (build_median.cpp, build_sah.cpp, build_sah_nlogn.cpp) --------------------
+// ---- the methods (build_median.cpp, build_sah.cpp, build_sah_nlogn.cpp, build_binned.cpp) ---------
 
 /// Each builds the tree of `boxes` (already validated, bounds = their union) into `out`.
 void build_median(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBuildParams& params,
@@ -249,5 +253,7 @@ void build_sah(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBu
                std::size_t max_depth, TreeWriter& out);
 void build_sah_nlogn(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBuildParams& params,
                      std::size_t max_depth, TreeWriter& out);
+void build_binned(const std::vector<Box3f>& boxes, const Box3f& bounds, const BoxBuildParams& params,
+                  std::size_t max_depth, TreeWriter& out);
 
 }  // namespace kdspace::detail

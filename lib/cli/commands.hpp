@@ -13,3 +13,4 @@ int run_render_command(const std::vector<std::string>& args);  // rays_command.c
 int run_pairs_command(const std::vector<std::string>& args);   // joins_command.cpp
 int run_count_command(const std::vector<std::string>& args);   // joins_command.cpp
 int run_index_command(const std::vector<std::string>& args);   // index_command.cpp
+int run_overlaps_command(const std::vector<std::string>& args);  // overlaps_command.cpp

@@ -58,4 +58,8 @@ void point_search_step(Context& context);
 /// (demo_rays.cpp).
 void ray_shooting_step(Context& context);
 
+/// All overlapping pairs, moving boxes (MovingScene), overlap queries and first contacts checked
+/// against brute force, and under --out a picture of colliding boxes (demo_collide.cpp).
+void collision_step(Context& context);
+
 }  // namespace kdspace::cli::demo

@@ -48,6 +48,7 @@ const std::vector<Step>& steps() {
   static const std::vector<Step> list = {
       {"point search", point_search_step},
       {"ray shooting", ray_shooting_step},
+      {"collisions", collision_step},
   };
   return list;
 }

@@ -123,7 +123,14 @@ void ray_shooting_step(Context& context) {
   const auto start = Clock::now();
   const Image image = render_image(tree, camera, render);
   const double render_s = seconds_since(start);
-  const std::string picture = s.out_dir.empty() ? std::string("kdspace-demo.png") : context.out_path("scene.png");
+  // The picture is written only under --out: nothing lands in the working folder unasked.
+  if (s.out_dir.empty()) {
+    context.report("Picture: rendered (" + std::to_string(width) + " x " + std::to_string(height) +
+                   ", with shadow rays) in " + fixed(render_s, 3) + " s on " + all_label +
+                   "; run with --out DIR to write it.\n");
+    return;
+  }
+  const std::string picture = context.out_path("scene.png");
   write_png(picture, image.rgb.data(), image.width, image.height);
   context.wrote(picture);
   context.report("Picture: " + picture + " (" + std::to_string(width) + " x " + std::to_string(height) +

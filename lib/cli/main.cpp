@@ -21,6 +21,7 @@ kdspace rays   --boxes FILE --rays FILE --out HITS.bin [--build median|sah|sah-n
 kdspace render --boxes FILE --out IMAGE.png [--width W] [--height H]
 kdspace pairs  --base A [--with B] -r R --out PAIRS.pairs [--metric M] [--boxsize L1,L2,...] [--threads T] [--stats]
 kdspace count  --base A [--with B] -r R1,R2,... [--metric M] [--boxsize L1,L2,...]   (JSON: radii, counts)
+kdspace overlaps --boxes A.boxes [--with B.boxes] --out PAIRS.pairs [--build binned|sah-nlogn|sah|median] [--threads T] [--stats]
 kdspace demo   [--out DIR] [--threads T] [--quick]
                runs the whole library on built-in generated data, checks it, prints a table
 kdspace --version | --help
@@ -57,6 +58,7 @@ int dispatch(const std::string& command, const std::vector<std::string>& args) {
   if (command == "pairs") return run_pairs_command(args);
   if (command == "count") return run_count_command(args);
   if (command == "index") return run_index_command(args);
+  if (command == "overlaps") return run_overlaps_command(args);
   return -1;
 }
 

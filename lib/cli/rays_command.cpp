@@ -1,11 +1,11 @@
 // The commands `kdspace rays` and `kdspace render` (see /DESIGN.md, "The command kdspace").
 #include <chrono>
 #include <cstdio>
-#include <filesystem>
 #include <limits>
 #include <string>
 #include <vector>
 
+#include "box_inputs.hpp"
 #include "commands.hpp"
 #include "guard.hpp"
 #include "json.hpp"
@@ -57,34 +57,6 @@ Exit codes: 0 success, 2 usage error, 1 bad data or I/O error.
 
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-/// The tree build the --build option names.
-BoxBuildMethod build_method(const std::string& name) {
-  if (name == "median") return BoxBuildMethod::median;
-  if (name == "sah") return BoxBuildMethod::sah;
-  return BoxBuildMethod::sah_nlogn;
-}
-
-/// Fails early, before long work, when the output cannot be created because its folder is missing.
-void check_output_folder(const std::string& path) {
-  const std::filesystem::path folder = std::filesystem::path(path).parent_path();
-  std::error_code ec;
-  if (!folder.empty() && !std::filesystem::is_directory(folder, ec))
-    throw Error(path + ": cannot open for writing: no folder " + folder.string());
-}
-
-std::vector<Box3f> read_boxes_with_progress(const std::string& path) {
-  Progress progress("reading " + path, Progress::Kind::elapsed);
-  return io::read_boxes(path);
-}
-
-BoxTree build_with_progress(const std::vector<Box3f>& boxes, const BoxBuildParams& params, double& seconds) {
-  Progress progress("building the tree", Progress::Kind::elapsed);
-  const Clock::time_point start = Clock::now();
-  BoxTree tree(boxes, params);
-  seconds = seconds_since(start);
-  return tree;
 }
 
 int rays_command(const std::vector<std::string>& args) {

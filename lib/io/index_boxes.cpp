@@ -46,6 +46,7 @@ void save(const std::string& path, const BoxTree& tree) {
   w.add(SectionType::nodes, 0, box_node_layout, p.nodes.data(), p.nodes.size());
   w.add(SectionType::references, 0, 1, p.references.data(), p.references.size());
   w.add(SectionType::leaf_blocks, 0, 1, p.blocks.data(), p.blocks.size());
+  w.add(SectionType::bounds, 0, 1, &p.bounds, 1);
   w.write(path);
 }
 
@@ -57,7 +58,7 @@ BoxTree load_box_tree(const std::shared_ptr<const IndexFile>& file) {
     file->fail("a box tree's header must say float32, no metric, dimension 3");
   const std::vector<std::uint64_t> w =
       file->words(SectionType::params, 0, box_params_version, box_param_words);
-  if (w[0] > 2 || w[1] > 1 || w[7] > 1 || w[9] > max_box_tree_depth || w[11] > 0xffffffffu)
+  if (w[0] > 3 || w[1] > 1 || w[7] > 1 || w[9] > max_box_tree_depth || w[11] > 0xffffffffu)
     file->fail("box tree parameters out of range");
   BoxTreeParts p;
   BoxBuildParams& b = p.params;
@@ -78,6 +79,7 @@ BoxTree load_box_tree(const std::shared_ptr<const IndexFile>& file) {
   p.nodes = file->array<BoxNode>(SectionType::nodes, 0, box_node_layout);
   p.references = file->array<std::uint32_t>(SectionType::references, 0, 1);
   p.blocks = file->array<LeafBlock>(SectionType::leaf_blocks, 0, 1);
+  p.bounds = file->array<Box3f>(SectionType::bounds, 0, 1, 1)[0];
   p.backing = file;
   try {
     return BoxTree(std::move(p));

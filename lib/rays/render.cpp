@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <string>
 
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/parallel.hpp"
@@ -87,6 +88,9 @@ Image render_image(const BoxTree& tree, const Camera& camera, const RenderParams
   if (params.width == 0 || params.height == 0) throw Error("image size must be at least 1 x 1");
   if (params.width > 1u << 15 || params.height > 1u << 15)
     throw Error("image size must be at most 32768 x 32768");
+  if (!params.box_colours.empty() && params.box_colours.size() != tree.size())
+    throw Error("box_colours: " + std::to_string(params.box_colours.size()) + " colours for " +
+                std::to_string(tree.size()) + " boxes");
   Image image;
   image.width = params.width;
   image.height = params.height;
@@ -143,7 +147,10 @@ Image render_image(const BoxTree& tree, const Camera& camera, const RenderParams
             }
             if (tree.any_hit(shadow).hit()) diffuse = 0;
           }
-          const Vec3 base = box_colour(static_cast<std::uint32_t>(box));
+          const Vec3 base = params.box_colours.empty()
+                                ? box_colour(static_cast<std::uint32_t>(box))
+                                : Vec3{params.box_colours[box][0], params.box_colours[box][1],
+                                       params.box_colours[box][2]};
           for (int a = 0; a < 3; ++a) colour[a] = base[a] * (ambient + (1 - ambient) * diffuse);
         }
         for (int c = 0; c < 3; ++c) image.rgb[pixel * 3 + c] = to_byte(colour[c]);

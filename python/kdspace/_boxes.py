@@ -33,9 +33,10 @@ class BoxTree:
     ----------
     boxes : array_like, shape (n, 6) or (n, 2, 3)
         Lower corner then upper corner of each box (float32). Box i keeps index i in the answers.
-    build : 'sah_nlogn' (default), 'sah' or 'median'
+    build : 'sah_nlogn' (default), 'sah', 'median' or 'binned'
         Surface Area Heuristic (Wald and Havran's O(N log N) build, or the O(N log^2 N) one, which
-        makes the same tree), or the median build.
+        makes the same tree), the median build, or the binned build (the fastest to build: for
+        overlapping pairs, and scenes built again often).
     workers : int
         Threads for the build; the tree does not depend on it.
     """
@@ -86,17 +87,17 @@ class BoxTree:
         the closest), or (-1, inf): the query for shadow rays."""
         return self._trace(origins, directions, t_min, t_max, True, workers)
 
-    def overlaps(self, other=None):
+    def overlaps(self, other=None, workers=1):
         """Pairs of overlapping boxes (closed: touching counts): within this tree's boxes (i < j),
-        or between them and `other` (a BoxTree or boxes; i here, j there). An (M, 2) array sorted
-        by (i, j)."""
-        if other is None:
-            return overlapping_pairs(self.boxes)
-        return overlapping_pairs(self.boxes, other.boxes if isinstance(other, BoxTree) else other)
+        or between them and `other` (a BoxTree, or boxes, which get a binned tree; i here, j
+        there). An (M, 2) array sorted by (i, j), each pair once, the same for any `workers`."""
+        if other is not None and not isinstance(other, BoxTree):
+            other = BoxTree(_boxes(other, "other"), build="binned", workers=workers)
+        pairs = self._core.overlaps(None if other is None else other._core, _workers(workers))
+        return pairs.astype(np.intp, copy=False)
 
 
-def overlapping_pairs(boxes, other=None):
+def overlapping_pairs(boxes, other=None, workers=1):
     """Pairs of overlapping closed boxes of one set (i < j) or of two sets, as an (M, 2) array sorted
-    by (i, j)."""
-    pairs = _core.overlapping_pairs(_boxes(boxes), None if other is None else _boxes(other, "other"))
-    return pairs.astype(np.intp, copy=False)
+    by (i, j): the broad phase of collision detection, on binned trees built for the purpose."""
+    return BoxTree(boxes, build="binned", workers=workers).overlaps(other, workers)

@@ -1,6 +1,6 @@
 // BoxIndex: the BoxTree over 3-D boxes for kdspace.BoxTree (closest hit, any hit over [t_min, t_max]
-// for many rays on threads), and the overlapping pairs of boxes. The GIL is released while it builds
-// and traces.
+// for many rays on threads; the overlapping pairs of its boxes, or of its boxes and another tree's,
+// by kdspace/collide/overlap.hpp). The GIL is released while it builds, traces and pairs.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "box_overlaps.hpp"
 #include "kdspace/boxes/box_tree.hpp"
+#include "kdspace/collide/overlap.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "module_parts.hpp"
 #include "numpy_arrays.hpp"
@@ -36,7 +36,16 @@ BoxBuildMethod method_named(const std::string& name) {
   if (name == "median") return BoxBuildMethod::median;
   if (name == "sah") return BoxBuildMethod::sah;
   if (name == "sah_nlogn" || name == "sah-nlogn") return BoxBuildMethod::sah_nlogn;
-  throw Error("build must be 'median', 'sah' or 'sah_nlogn', got '" + name + "'");
+  if (name == "binned") return BoxBuildMethod::binned;
+  throw Error("build must be 'sah_nlogn', 'sah', 'median' or 'binned', got '" + name + "'");
+}
+
+/// Pairs as an M x 2 array.
+py::array_t<std::int64_t> pairs_array(const std::vector<IndexPair>& pairs) {
+  std::vector<std::int64_t> flat;
+  flat.reserve(2 * pairs.size());
+  for (const IndexPair& p : pairs) flat.push_back(p.a), flat.push_back(p.b);
+  return take_vector(std::move(flat), {static_cast<py::ssize_t>(pairs.size()), 2});
 }
 
 class BoxIndex {
@@ -51,6 +60,16 @@ class BoxIndex {
   }
 
   const BoxTree& tree() const { return *tree_; }
+
+  /// The overlapping pairs of this tree's boxes (i < j), or of its boxes and other's, sorted.
+  py::array_t<std::int64_t> overlaps(const BoxIndex* other, unsigned threads) const {
+    std::vector<IndexPair> pairs;
+    {
+      py::gil_scoped_release unlocked;
+      pairs = other == nullptr ? overlapping_pairs(*tree_, threads) : overlapping_pairs(*tree_, other->tree(), threads);
+    }
+    return pairs_array(pairs);
+  }
 
   /// The hits of n rays (origins and directions, n x 3 each) with t in [t_min, t_max]: the closest
   /// (any_hit false) or the first found (true). Returns (box indices, -1 for a miss; t, inf for a miss).
@@ -89,26 +108,6 @@ class BoxIndex {
   std::unique_ptr<BoxTree> tree_;
 };
 
-/// Overlapping pairs (closed boxes) within one set (i < j) or between two, as an M x 2 array sorted.
-py::array_t<std::int64_t> overlapping_pairs(const CArray<float>& first, py::object second) {
-  const std::vector<Box3f> a = boxes_of(first);
-  std::vector<Box3f> b;
-  const bool two_sets = !second.is_none();
-  if (two_sets) b = boxes_of(second.cast<CArray<float>>());
-  for (const std::vector<Box3f>* set : {&a, static_cast<const std::vector<Box3f>*>(&b)})
-    for (std::size_t i = 0; i < set->size(); ++i) {
-      const std::string problem = box_problem((*set)[i]);
-      if (!problem.empty()) throw Error("box " + std::to_string(i + 1) + ": " + problem);
-    }
-  std::vector<std::int64_t> pairs;
-  {
-    py::gil_scoped_release unlocked;
-    pairs = two_sets ? overlaps_between(a, b) : overlaps_within(a);
-  }
-  const auto count = static_cast<py::ssize_t>(pairs.size() / 2);
-  return take_vector(std::move(pairs), {count, 2});
-}
-
 }  // namespace
 
 void bind_boxes(py::module_& m) {
@@ -123,8 +122,8 @@ void bind_boxes(py::module_& m) {
       .def_property_readonly("sah_cost", [](const BoxIndex& b) { return b.tree().stats().sah_cost; })
       .def_property_readonly("build_seconds", [](const BoxIndex& b) { return b.tree().stats().build_seconds; })
       .def("trace", &BoxIndex::trace, py::arg("origins"), py::arg("directions"), py::arg("t_min"), py::arg("t_max"),
-           py::arg("any_hit"), py::arg("threads"));
-  m.def("overlapping_pairs", &overlapping_pairs, py::arg("boxes"), py::arg("other"));
+           py::arg("any_hit"), py::arg("threads"))
+      .def("overlaps", &BoxIndex::overlaps, py::arg("other").none(true), py::arg("threads"));
 }
 
 }  // namespace kdspace::python

@@ -79,6 +79,11 @@ def test_overlapping_pairs_equal_all_pairs():
     pairs = tree.overlaps(kdspace.BoxTree(b))
     assert set(map(tuple, pairs.tolist())) == between
     assert pairs.tolist() == sorted(pairs.tolist())
+    assert tree.overlaps(b).tolist() == pairs.tolist()  # boxes as an array get a tree of their own
+    binned = kdspace.BoxTree(a, build="binned")
+    assert binned.overlaps(workers=3).tolist() == [list(p) for p in sorted(within)]
+    assert kdspace.overlapping_pairs(a, b, workers=2).tolist() == pairs.tolist()
+    assert kdspace.overlapping_pairs(np.zeros((0, 6), np.float32)).shape == (0, 2)
     touching = np.float32([[0, 0, 0, 1, 1, 1], [1, 0, 0, 2, 1, 1]])  # closed boxes: a shared face counts
     assert kdspace.overlapping_pairs(touching).tolist() == [[0, 1]]
 

@@ -8,6 +8,11 @@
 //   sah_nlogn  the same heuristic with the events sorted once and kept sorted while splitting
 //              (Wald & Havran 2006, "On building fast kd-trees for ray tracing, and on doing that in
 //              O(N log N)"): O(N log N). Builds exactly the tree `sah` builds.
+//   binned     for scenes rebuilt every frame (moving boxes, collisions): planes chosen over the
+//              boxes' centres in place (faces counted in 32 bins, the plane that balances the children
+//              and cuts few boxes), then each box sent down to the leaves it overlaps; no sorting, no
+//              copying of boxes from node to node (lib/boxes/build_binned.cpp). Stops at leaf_size
+//              centres or max_depth.
 // Both SAH builds use "perfect splits" (a box straddling the cell is clipped to it before its faces
 // become candidate planes) and planar events (a flat box lying in the plane goes to the cheaper side).
 //
@@ -35,7 +40,11 @@
 
 namespace kdspace {
 
-enum class BoxBuildMethod { median, sah, sah_nlogn };
+namespace detail {
+struct TreeLayout;  // lib/boxes/layout.hpp
+}  // namespace detail
+
+enum class BoxBuildMethod { median, sah, sah_nlogn, binned };
 
 /// Where the median build puts its plane along the cycled axis.
 enum class MedianPosition {
@@ -77,8 +86,8 @@ struct BoxBuildParams {
   /// default: it pays in sparse scenes, and costs little in dense ones.
   float empty_bonus = 0.1f;
 
-  /// S_minObj for the median build: a node with at most this many boxes becomes a leaf. The SAH
-  /// builds stop by cost instead and ignore it.
+  /// S_minObj for the median and binned builds: a node with at most this many boxes becomes a leaf.
+  /// The SAH builds stop by cost instead and ignore it.
   std::size_t leaf_size = 4;
   /// S_maxProf: nodes at this depth become leaves (the root has depth 0). 0 = automatic:
   /// round(8 + 1.3 log2 N), the rule of pbrt. At most max_box_tree_depth.
@@ -161,7 +170,9 @@ struct BoxTreeStats {
   /// Expected cost of a ray through the scene bounds, the SAH cost of the tree (W&H 2006):
   /// sum over inner nodes of K_t * P(node) + sum over leaves of K_i * ceil(|boxes| / 4) * P(leaf),
   /// P(cell) = SA(cell) / SA(scene bounds). Always by surface area, whatever `probability` the
-  /// build used, so that trees built either way can be compared.
+  /// build used, so that trees built either way can be compared. That of the tree as built: a
+  /// refit() updates the other figures (a walk over the cells would cost it more than it saves).
+  /// build_seconds after a refit: the refit's.
   double sah_cost = 0;
   double build_seconds = 0;
 };
@@ -175,6 +186,7 @@ struct BoxTreeParts {
   detail::Storage<BoxNode> nodes;
   detail::Storage<std::uint32_t> references;
   detail::Storage<LeafBlock> blocks;
+  Box3f bounds;  ///< the root cell: holds every box (the union of the boxes, or more after a refit)
   std::shared_ptr<const void> backing;
 };
 
@@ -196,7 +208,8 @@ class BoxTree {
 
   std::size_t size() const { return boxes_.size(); }
   const Box3f& box(std::size_t i) const { return boxes_[i]; }
-  /// The union of all boxes (the root cell); lo > hi on every axis when the tree is empty.
+  /// The root cell: the union of all boxes (after refit(), also of the cells the planes were made
+  /// in); lo > hi on every axis when the tree is empty.
   const Box3f& bounds() const { return bounds_; }
   const BoxBuildParams& params() const { return params_; }
   const BoxTreeStats& stats() const { return stats_; }
@@ -212,11 +225,26 @@ class BoxTree {
   const std::uint32_t* leaf_references(const BoxNode& leaf) const {
     return references_.data() + leaf.first();
   }
+  /// The leaves' boxes, four to a block: leaf_blocks()[r / 4] holds box(references()[r]) in lane r % 4.
+  const detail::Storage<LeafBlock>& leaf_blocks() const { return blocks_; }
   /// Bytes held: the boxes (24 each), the nodes (8 each), the references (4 each) and the leaf blocks
   /// (96 bytes per 4 references: a copy of each leaf's boxes, tested without an indirection).
   std::size_t memory_bytes() const {
     return boxes_.memory_bytes() + nodes_.memory_bytes() + references_.memory_bytes() + blocks_.memory_bytes();
   }
+
+  // ---- moving boxes (lib/boxes/refit.cpp) ---------------------------------------------------------
+
+  /// Refit: the boxes move (or are replaced by n others); the split planes stay, and every box is
+  /// sent again to the leaves it now overlaps (one descent a box, no planes chosen, no sorting).
+  /// Queries then answer for the new boxes exactly, but the tree fits them less well as they drift
+  /// from where the planes were chosen (kdspace/collide/moving_scene.hpp decides when to rebuild).
+  /// Returns false, leaving the tree as it was, when the leaves would hold more than
+  /// max_references_per_box references a box; throws Error for a bad box, as the constructor does.
+  bool refit(const Box3f* boxes, std::size_t n);
+  /// The same when only the boxes moved[0 .. m) have changed (ids strictly ascending, below size()):
+  /// boxes[0 .. size()) are all the boxes, and only the moved ones are read and sent down again.
+  bool refit(const Box3f* boxes, const std::uint32_t* moved, std::size_t m);
 
   // ---- single rays (const, thread-safe) ----------------------------------------------------------
 
@@ -279,7 +307,11 @@ class BoxTree {
   template <bool AnyHit>
   void trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const;
   void compute_stats();
-  void compute_bounds();
+  void compute_bounds();  ///< bounds_ := the union of the boxes
+  void set_bounds(const Box3f& bounds);
+  void count_leaves();
+  /// Takes arrays of its own for boxes and layout (refit), dropping any borrowed storage.
+  void own(std::vector<Box3f> boxes, detail::TreeLayout&& layout);
 
   // Owned, or borrowed from a mapped index file that backing_ keeps alive.
   detail::Storage<Box3f> boxes_;

@@ -58,6 +58,14 @@ class Storage {
   const T* end() const { return data_ + size_; }
   /// Writable access to owned memory (a builder filling it in place); nullptr when borrowed.
   T* owned_data() { return borrowed_ ? nullptr : owned_.data(); }
+  /// The values as a vector of their own (the owned one moved out, or borrowed memory copied),
+  /// leaving this storage empty: for a change in place (BoxTree::refit), stored back with
+  /// Storage(std::move(values)).
+  std::vector<T> release() {
+    std::vector<T> values = borrowed_ ? std::vector<T>(data_, data_ + size_) : std::move(owned_);
+    clear();
+    return values;
+  }
   /// Whether the memory is borrowed (mapped) rather than owned.
   bool borrowed() const { return borrowed_; }
   /// Bytes the array takes: its capacity when owned, its size when borrowed.

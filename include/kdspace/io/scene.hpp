@@ -27,7 +27,8 @@ std::vector<Ray> read_rays(const std::string& path);
 /// Hits with box index >= -1 (t is not checked).
 std::vector<Hit> read_hits(const std::string& path);
 
-/// The writers store what they are given, unchecked (so that tests can make bad files).
+/// The writers store what they are given, unchecked (so that tests can make bad files), atomically:
+/// into a temporary file in the same folder, renamed to `path` once complete.
 void write_boxes(const std::string& path, const Box3f* boxes, std::size_t n);
 void write_boxes(const std::string& path, const std::vector<Box3f>& boxes);
 void write_rays(const std::string& path, const Ray* rays, std::size_t n);

@@ -1,6 +1,7 @@
 // render_image: a shaded picture of a box scene, traced through a BoxTree.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -17,6 +18,8 @@ struct RenderParams {
   bool shadows = true;
   /// Threads; 0 = all hardware threads. The image does not depend on it.
   unsigned threads = 0;
+  /// When not empty, one colour a box (RGB in [0, 1]), used instead of the colour of its index.
+  std::vector<std::array<float, 3>> box_colours;
 };
 
 /// An RGB image, 3 bytes a pixel, rows from the top.
