@@ -412,7 +412,9 @@ std::vector<T> small_integer_offsets(const ScanData<T>& data, const U* rows, con
     for (std::size_t i = 0; i < count; ++i)
       for (std::size_t a = 0; a < d; ++a) {
         const double v = static_cast<double>(x[i * d + a]);
-        if (!(v == std::floor(v) && std::abs(v) < 16777216.0)) return false;  // integers, exact in float
+        // An integer, exact in float (NaN fails the first test). Not std::floor: without SSE4.1 it is
+        // a library call, and this check reads every coordinate of every call.
+        if (!(std::abs(v) < 16777216.0) || static_cast<double>(static_cast<std::int32_t>(v)) != v) return false;
         lo[a] = std::min(lo[a], v);
         hi[a] = std::max(hi[a], v);
       }
@@ -657,7 +659,9 @@ void scan_rows(const ScanData<T>& data, const U* rows, const T* queries, std::si
   const std::size_t d = data.dim;
   // Small integers: exact 16-bit products. Below 2^24 the distances are exact in float (and every
   // extent is below 4096: the 16-bit values and their 32-bit sums cannot overflow).
+  Laps laps(data.profile);
   const std::vector<T> offset = small_integer_offsets(data, rows, queries, nq, 16777216.0);
+  laps.lap(&ScanProfile::check_s);
   if (!offset.empty()) return scan_small_integers(data, rows, queries, nq, k, offset, out);
 
   // Could an estimate overflow? The data's part is bounded from the largest centred row norm; the
@@ -681,6 +685,7 @@ void scan_rows(const ScanData<T>& data, const U* rows, const T* queries, std::si
       exact_scan(data, rows, row, k, out + q * k);  // absurdly large coordinates: no estimate
     }
   }
+  laps.lap(&ScanProfile::check_s);
   if (kept_index.size() == nq) return scan_estimated(data, rows, queries, nq, k, out);
   std::vector<Neighbor<T>> answers(kept_index.size() * k);
   scan_estimated(data, rows, kept_queries.data(), kept_index.size(), k, answers.data());

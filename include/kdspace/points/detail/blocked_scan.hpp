@@ -25,6 +25,7 @@ namespace kdspace::detail {
 
 /// Where one call's time went (kdspace-scan-bench): filled when ScanData::profile is set.
 struct ScanProfile {
+  double check_s = 0;      ///< the checks of the data: small integers? estimates at risk of overflow?
   double prepare_s = 0;    ///< converting and packing the point blocks, their norms
   double product_s = 0;    ///< the products with the bound test fused in, and keeping the candidates
   double recheck_s = 0;    ///< exact distances of the candidates, the final ranking
