@@ -54,7 +54,8 @@ constexpr std::size_t point_block = 1024;
 constexpr std::size_t query_block = 48;  // a multiple of tile_queries
 constexpr std::size_t tile_points = 16;  // the kernels' register tile: 16 points x 6 queries
 constexpr std::size_t tile_queries = 6;
-constexpr std::size_t wide_points = 32;  // the AVX-512 kernels' tile: 32 points (two packed tiles) x 12 queries
+// The AVX-512 kernels' tile: 32 points (two packed tiles) x 12 queries.
+constexpr std::size_t wide_points = 32;
 constexpr std::size_t wide_queries = 12;
 constexpr std::size_t query_padding = 12;  // query rows are padded to a multiple of both tiles' queries
 
@@ -103,6 +104,17 @@ inline std::size_t packed_at(std::size_t i, std::size_t a, std::size_t width) {
 }
 
 #if defined(KDSPACE_X86_KERNELS)
+/// Calls take(j, first + i, lanes[i], extra[i]...) for each set bit i of mask: the entries of query
+/// j's row of a tile that passed its test.
+template <class Value, class Take, class... Extra>
+inline void take_lanes(unsigned mask, std::size_t j, std::size_t first, const Value* lanes, Take& take,
+                       const Extra*... extra) {
+  for (; mask != 0; mask &= mask - 1) {
+    const unsigned lane = static_cast<unsigned>(__builtin_ctz(mask));
+    take(j, first + lane, lanes[lane], extra[lane]...);
+  }
+}
+
 // The products of one tile of 16 points with 6 queries, in 12 registers named one by one: held in an
 // array, GCC keeps the accumulators in memory and stores them at every step.
 #define KDSPACE_TILE_ACCUMULATORS(type, zero) \
@@ -147,16 +159,13 @@ __attribute__((target("avx2,fma"))) void float_tile(const float* tile, const flo
       const __m256 sum = _mm256_add_ps(_mm256_loadu_ps(p_norm + 8 * h), qn);
       const __m256 estimate = _mm256_sub_ps(sum, _mm256_mul_ps(two, _mm256_load_ps(dots[j] + 8 * h)));
       const __m256 margin = _mm256_add_ps(_mm256_mul_ps(scale_v, sum), floor_v);
-      unsigned pass = static_cast<unsigned>(
+      const unsigned pass = static_cast<unsigned>(
           _mm256_movemask_ps(_mm256_cmp_ps(_mm256_sub_ps(estimate, margin), lim, _CMP_LE_OQ)));
       if (pass == 0) continue;
       alignas(32) float e[8], m[8];
       _mm256_store_ps(e, estimate);
       _mm256_store_ps(m, margin);
-      for (; pass != 0; pass &= pass - 1) {
-        const unsigned lane = static_cast<unsigned>(__builtin_ctz(pass));
-        take(j, 8 * h + lane, e[lane], m[lane]);
-      }
+      take_lanes(pass, j, 8 * h, e, take, m);
     }
   }
 }
@@ -203,14 +212,11 @@ __attribute__((target("avx2"))) void int16_tile(const std::int16_t* tile, const 
       const __m256i sum = _mm256_add_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p_norm + 8 * h)), qn);
       const __m256i dot = _mm256_load_si256(reinterpret_cast<const __m256i*>(dots[j] + 8 * h));
       const __m256i dist = _mm256_sub_epi32(sum, _mm256_add_epi32(dot, dot));
-      unsigned pass = ~static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(dist, lim)))) & 0xffu;
+      const unsigned pass = ~static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(dist, lim)))) & 0xffu;
       if (pass == 0) continue;
       alignas(32) std::int32_t value[8];
       _mm256_store_si256(reinterpret_cast<__m256i*>(value), dist);
-      for (; pass != 0; pass &= pass - 1) {
-        const unsigned lane = static_cast<unsigned>(__builtin_ctz(pass));
-        take(j, 8 * h + lane, value[lane]);
-      }
+      take_lanes(pass, j, 8 * h, value, take);
     }
   }
 }
@@ -221,16 +227,6 @@ __attribute__((target("avx2"))) void int16_tile(const std::int16_t* tile, const 
 // come interleaved (interleave_queries): axis a of the 12 queries at q[12 a .. 12 a + 12), so that
 // every broadcast reads at a fixed offset from one pointer.
 #define KDSPACE_FOR_12(M) M(0) M(1) M(2) M(3) M(4) M(5) M(6) M(7) M(8) M(9) M(10) M(11)
-
-/// Calls take(j, i, lanes[i]) for each set bit i of mask (lanes: 16 values of query j's row).
-template <class Value, class Take, class... Extra>
-inline void take_lanes(unsigned mask, std::size_t j, std::size_t first, const Value* lanes, Take& take,
-                       const Extra*... extra) {
-  for (; mask != 0; mask &= mask - 1) {
-    const unsigned lane = static_cast<unsigned>(__builtin_ctz(mask));
-    take(j, first + lane, lanes[lane], extra[lane]...);
-  }
-}
 
 /// As float_tile, on 32 points x 12 interleaved queries.
 template <class Take>
