@@ -56,7 +56,7 @@ namespace {
 // A block of 1024 points of 128 floats takes 512 KiB, of 128 16-bit integers 256 KiB: it stays in
 // the second-level cache while every query block goes past it.
 constexpr std::size_t point_block = 1024;
-constexpr std::size_t query_block = 48;  // a multiple of tile_queries
+constexpr std::size_t query_block = 48;  // a multiple of tile_queries and of wide_queries
 constexpr std::size_t tile_points = 16;  // the kernels' register tile: 16 points x 6 queries
 constexpr std::size_t tile_queries = 6;
 // The AVX-512 kernels' tile: 32 points (two packed tiles) x 12 queries.
