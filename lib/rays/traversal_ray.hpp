@@ -119,6 +119,18 @@ struct TraversalRay {
   }
 };
 
+/// The children of the inner node `index` (left: index + 1, right: `right`) in the order the ray
+/// meets them, near first; `towards_negative` is 1 when the ray runs towards -axis of the node's
+/// split. Bit arithmetic, not a branch: for incoherent rays the sign on the node's axis is
+/// unpredictable, and as a branch it was the traversal's most mispredicted one (callgrind's branch
+/// simulation: 4.4 of 22 mispredictions per random ray through a scanned mesh's triangle boxes).
+inline void order_children(std::uint32_t index, std::uint32_t right, std::uint32_t towards_negative,
+                           std::uint32_t& near, std::uint32_t& far) {
+  const std::uint32_t left = index + 1, differ = (left ^ right) & (0u - towards_negative);
+  near = left ^ differ;
+  far = right ^ differ;
+}
+
 /// Narrows [t_lo, t_hi] to the part of the ray inside the closed box, widened (a superset of what
 /// the double slab test finds); false when that part is empty.
 template <class Real>
