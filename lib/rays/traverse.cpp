@@ -152,11 +152,14 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
       const Real t_split = (static_cast<Real>(node.split()) - r.origin[axis]) * r.inverse[axis];
       if (t_split < detail::widen_down(t_entry)) {
         index = far;  // the ray crossed the plane before entering the cell
-      } else if (t_split > detail::widen_up(t_exit)) {
-        index = near;  // the ray leaves the cell before reaching the plane
       } else {
-        // Max and min written so that a NaN t_split leaves the interval as it is.
-        stack[top++] = StackEntry<Real>{far, t_split > t_entry ? t_split : t_entry, t_exit};
+        // The near child next; the far one too unless the ray leaves the cell before reaching the
+        // plane. Its entry is written either way and kept by counting it, not by a branch: whether
+        // a random ray reaches the plane is unpredictable. Max and min written so that a NaN
+        // t_split leaves the interval as it is (and pushes the far child); in the near-only case
+        // t_split > t_exit, so the new t_exit is the old one.
+        stack[top] = StackEntry<Real>{far, t_split > t_entry ? t_split : t_entry, t_exit};
+        top += !(t_split > detail::widen_up(t_exit));
         index = near;
         t_exit = t_split < t_exit ? t_split : t_exit;
       }
