@@ -141,10 +141,12 @@ inline bool clip_widened(const Box3f& b, const TraversalRay<Real>& r, Real& t_lo
       if (r.origin[a] < lo || r.origin[a] > hi) return false;
       continue;
     }
-    Real t0 = (lo - r.origin[a]) * r.inverse[a], t1 = (hi - r.origin[a]) * r.inverse[a];
-    if (r.negative[a]) std::swap(t0, t1);
-    t_lo = std::max(t_lo, widen_down(t0));
-    t_hi = std::min(t_hi, widen_up(t1));
+    const Real t0 = (lo - r.origin[a]) * r.inverse[a], t1 = (hi - r.origin[a]) * r.inverse[a];
+    // Entered at the smaller parameter, left at the larger (neither is NaN: the direction is not 0
+    // on this axis). A min and a max, not a swap on the direction's sign: as a branch that was
+    // mispredicted 1.5 times a random ray (callgrind's branch simulation).
+    t_lo = std::max(t_lo, widen_down(std::min(t0, t1)));
+    t_hi = std::min(t_hi, widen_up(std::max(t0, t1)));
   }
   return t_lo <= t_hi;
 }
