@@ -113,19 +113,29 @@ class CountRule {
   void base_case(std::uint32_t q, std::uint32_t r, const Context& context) {
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
-    const T largest = radii_[context.hi];
+    // Pairs beyond the last radius fall in no count: the leaves bin only up to it.
+    const std::uint32_t hi = std::min(context.hi, static_cast<std::uint32_t>(radii_.size() - 2));
+    const T largest = radii_[hi];
+    if constexpr (std::is_same_v<Count, std::uint64_t>) std::fill(within_.begin() + context.lo, within_.begin() + hi + 1, 0);
     bounds_to_box(queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t i, T lower) {
       if (lower > largest) return;
       const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
       stats_.distances += rn.end - first;
-      distances_to_leaf(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
-        const std::uint32_t bin = first_at_least(context.lo, context.hi, d);
-        if constexpr (std::is_same_v<Count, double>)
-          bins_[bin] += query_weights_->by_position[i] * reference_weights_->by_position[j];
-        else
-          ++bins_[bin];
-      });
+      if constexpr (std::is_same_v<Count, double>) {
+        distances_to_leaf(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
+          bins_[first_at_least(context.lo, hi, d)] +=
+              query_weights_->by_position[i] * reference_weights_->by_position[j];
+        });
+      } else {
+        distance_blocks(reference_, r, first, queries_.point(i), space_, [&](const auto& dist, unsigned keep, std::uint32_t) {
+          count_block(dist, keep, context.lo, hi);
+        });
+      }
     });
+    if constexpr (std::is_same_v<Count, std::uint64_t>) {
+      bins_[context.lo] += within_[context.lo];
+      for (std::uint32_t j = context.lo + 1; j <= hi; ++j) bins_[j] += within_[j] - within_[j - 1];
+    }
   }
 
  private:
@@ -141,6 +151,23 @@ class CountRule {
       n -= half;
     }
     return static_cast<std::uint32_t>(first - radii_.data());
+  }
+
+  // Adds to within_[j], for j in [lo, hi], the distances of a block (those marked in `keep`) that
+  // are at most radius j: one vector comparison per radius, instead of a search per pair; once a
+  // radius holds every pair of the block left, so do the larger ones.
+  template <class Block>
+  void count_block(const Block& dist, unsigned keep, std::uint32_t lo, std::uint32_t hi) {
+    const unsigned inside = at_most(dist, radii_[hi]) & keep;
+    if (!inside) return;
+    const std::uint64_t all = bits_set(inside);
+    std::uint32_t j = lo;
+    for (; j < hi; ++j) {
+      const unsigned near = at_most(dist, radii_[j]) & inside;
+      within_[j] += bits_set(near);
+      if (near == inside) break;
+    }
+    for (j = j < hi ? j + 1 : hi; j <= hi; ++j) within_[j] += all;
   }
 
   template <class Node>
@@ -166,6 +193,7 @@ class CountRule {
   const NodeWeights* reference_weights_;
   std::vector<Count>& bins_;
   JoinStats& stats_;
+  std::vector<std::uint64_t> within_ = std::vector<std::uint64_t>(radii_.size());  // a leaf pair's pairs within each radius
 };
 
 }  // namespace kdspace::detail

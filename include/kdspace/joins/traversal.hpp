@@ -142,28 +142,48 @@ inline unsigned take_lowest_bit(unsigned& bits) {
 }
 
 /// The distances from point `a` to the points [first, leaf.end) of reference leaf `id`, computed a
-/// block at a time from the leaf's columns (vector instructions); visit(position, distance) for
-/// those at most `limit` (re-read before each block: a k-NN join lowers it as it goes), in order.
+/// block at a time from the leaf's columns (vector instructions): visit(distances, keep, base) for
+/// each block, where bit j of `keep` marks the positions base + j in [first, leaf.end) (positions
+/// before `first` in the first block, and the padding past the end in the last, are masked off).
 template <class Tree, class Space, class T, class Visit>
-void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
-                       const T& limit, Visit&& visit) {
+void distance_blocks(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
+                     Visit&& visit) {
   constexpr std::size_t block = Tree::column_block;
   const auto& leaf = reference.node(id);
   const std::size_t stride = Tree::column_stride(leaf);
   const T* columns = reference.columns(id);
   std::size_t start = (first - leaf.begin) / block * block;
-  // Positions before `first` in the first block, and past the end in the last, are masked off.
   unsigned keep = ~0u << (first - leaf.begin - start);
   for (; start < leaf.count(); start += block, keep = ~0u) {
     const std::array<T, block> dist = space.template distances<block>(a, columns + start, stride, reference.dim());
     if (leaf.count() - start < block) keep &= (1u << (leaf.count() - start)) - 1;
+    visit(dist, keep, leaf.begin + static_cast<std::uint32_t>(start));
+  }
+}
+
+/// distance_blocks, point by point: visit(position, distance) for the points at most `limit`
+/// (re-read before each block: a k-NN join lowers it as it goes), in order.
+template <class Tree, class Space, class T, class Visit>
+void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
+                       const T& limit, Visit&& visit) {
+  distance_blocks(reference, id, first, a, space, [&](const auto& dist, unsigned keep, std::uint32_t base) {
     unsigned near = at_most(dist, limit) & keep;
-    const std::uint32_t base = leaf.begin + static_cast<std::uint32_t>(start);
     while (near) {
       const unsigned j = take_lowest_bit(near);
       visit(base + j, dist[j]);
     }
-  }
+  });
+}
+
+/// The number of set bits of a block's mask of at most 8 bits (a table: the popcnt instruction is
+/// not part of baseline x86-64).
+inline unsigned bits_set(unsigned bits) {
+  static constexpr auto table = [] {
+    std::array<unsigned char, 256> t{};
+    for (unsigned v = 1; v < 256; ++v) t[v] = static_cast<unsigned char>(t[v >> 1] + (v & 1u));
+    return t;
+  }();
+  return table[bits & 255u];
 }
 
 /// For each point of query leaf `id`, in order, visit(position, bound): the lower bound of its
