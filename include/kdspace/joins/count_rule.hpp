@@ -116,22 +116,24 @@ class CountRule {
     // Pairs beyond the last radius fall in no count: the leaves bin only up to it.
     const std::uint32_t hi = std::min(context.hi, static_cast<std::uint32_t>(radii_.size() - 2));
     const T largest = radii_[hi];
-    if constexpr (std::is_same_v<Count, std::uint64_t>) std::fill(within_.begin() + context.lo, within_.begin() + hi + 1, 0);
-    bounds_to_box(queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t i, T lower) {
-      if (lower > largest) return;
-      const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
-      stats_.distances += rn.end - first;
-      if constexpr (std::is_same_v<Count, double>) {
-        distances_to_leaf(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
-          bins_[first_at_least(context.lo, hi, d)] +=
-              query_weights_->by_position[i] * reference_weights_->by_position[j];
+    if constexpr (std::is_same_v<Count, std::uint64_t>)
+      std::fill(within_.begin() + context.lo, within_.begin() + hi + 1, 0);
+    const auto limits = same_limit<T, Tree::column_block>(largest);
+    points_near_box(
+        queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t) { return limits.data(); },
+        [&](std::uint32_t i) {
+          const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
+          stats_.distances += rn.end - first;
+          if constexpr (std::is_same_v<Count, double>) {
+            distances_to_leaf(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
+              bins_[first_at_least(context.lo, hi, d)] +=
+                  query_weights_->by_position[i] * reference_weights_->by_position[j];
+            });
+          } else {
+            distance_blocks(reference_, r, first, queries_.point(i), space_,
+                            [&](const auto& dist, unsigned keep, std::uint32_t) { count_block(dist, keep, context.lo, hi); });
+          }
         });
-      } else {
-        distance_blocks(reference_, r, first, queries_.point(i), space_, [&](const auto& dist, unsigned keep, std::uint32_t) {
-          count_block(dist, keep, context.lo, hi);
-        });
-      }
-    });
     if constexpr (std::is_same_v<Count, std::uint64_t>) {
       bins_[context.lo] += within_[context.lo];
       for (std::uint32_t j = context.lo + 1; j <= hi; ++j) bins_[j] += within_[j] - within_[j - 1];
@@ -193,7 +195,8 @@ class CountRule {
   const NodeWeights* reference_weights_;
   std::vector<Count>& bins_;
   JoinStats& stats_;
-  std::vector<std::uint64_t> within_ = std::vector<std::uint64_t>(radii_.size());  // a leaf pair's pairs within each radius
+  // A leaf pair's pairs within each radius (count_block).
+  std::vector<std::uint64_t> within_ = std::vector<std::uint64_t>(radii_.size());
 };
 
 }  // namespace kdspace::detail

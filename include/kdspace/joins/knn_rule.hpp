@@ -37,9 +37,13 @@ class KnnTable {
 
   KnnTable(std::size_t n, std::size_t k)
       : k_(k), sorted_rows_(k <= sorted_rows_up_to), candidates_(n * k), sizes_(n, 0),
-        kth_(n, std::numeric_limits<T>::infinity()) {}
+        kth_(n + row_padding, std::numeric_limits<T>::infinity()) {}
 
   T kth(std::size_t i) const { return kth_[i]; }
+  /// kth(i) for the rows [first, first + row_padding) (+inf past the last row): the limits of a
+  /// block of query points (points_near_box).
+  const T* kths(std::size_t first) const { return kth_.data() + first; }
+  static constexpr std::size_t row_padding = 32;
 
   /// Offers a candidate to row i: kept when the row holds fewer than k or it comes before the k-th
   /// in (distance, index) order (the decision of KnnResults::offer); false when refused.
@@ -94,6 +98,7 @@ class KnnRule {
   using Tree = BoundedTree<T, Dim>;
   struct Context {};
   static constexpr bool nearest_first = true;
+  static_assert(Tree::column_block <= KnnTable<T>::row_padding, "a block of rows' k-th distances is read at once");
 
   /// `table` rows are the query tree's leaf-order positions; `node_bound` holds B(N_q) per query node
   /// (+inf to start). self: queries and reference are the same tree, and a point is not its own
@@ -119,25 +124,26 @@ class KnnRule {
   bool rescore(std::uint32_t q, std::uint32_t, T key) const { return !(key > node_bound_[q]); }
 
   void base_case(std::uint32_t q, std::uint32_t r, const Context&) {
+    const auto& qn = queries_.node(q);
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
-    T leaf_bound = 0;
-    bounds_to_box(queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t i, T lower) {
-      T kth = table_.kth(i);
-      // The leaf's box may lie beyond this point's k-th even when it does not beyond the node's bound.
-      if (!(lower > kth)) {
-        const T* a = queries_.point(i);
-        if (rn.all_identical) {
-          kth = offer_identical(i, a, rn);
-        } else {
+    // The leaf's box may lie beyond a point's k-th even when it does not beyond the node's bound.
+    points_near_box(
+        queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t base) { return table_.kths(base); },
+        [&](std::uint32_t i) {
+          const T* a = queries_.point(i);
+          if (rn.all_identical) {
+            offer_identical(i, a, rn);
+            return;
+          }
+          T kth = table_.kth(i);
           stats_.distances += rn.count();
           distances_to_leaf(reference_, r, rn.begin, a, space_, kth, [&](std::uint32_t j, T d) {
             if (d <= kth && !(same_leaf && j == i) && table_.offer(i, d, reference_.index(j))) kth = table_.kth(i);
           });
-        }
-      }
-      leaf_bound = std::max(leaf_bound, kth);
-    });
+        });
+    T leaf_bound = 0;
+    for (std::uint32_t i = qn.begin; i < qn.end; ++i) leaf_bound = std::max(leaf_bound, table_.kth(i));
     node_bound_[q] = leaf_bound;
   }
 
@@ -156,14 +162,13 @@ class KnnRule {
 
   // A leaf of coinciding points: one distance serves all, and as their indices ascend the first
   // refusal ends the offers.
-  T offer_identical(std::uint32_t i, const T* a, const typename Tree::Node& rn) {
+  void offer_identical(std::uint32_t i, const T* a, const typename Tree::Node& rn) {
     const T d = space_.distance(a, reference_.point(rn.begin), dim());
     ++stats_.distances;
     for (std::uint32_t j = rn.begin; j < rn.end; ++j) {
       if (self_ && j == i) continue;
       if (!table_.offer(i, d, reference_.index(j))) break;
     }
-    return table_.kth(i);
   }
 
   const Tree& queries_;

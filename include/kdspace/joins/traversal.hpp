@@ -129,6 +129,28 @@ unsigned at_most(const std::array<T, N>& values, T limit) {
   return bits;
 }
 
+/// The bits of the values of a block that are not above their own limits (bit j: !(values[j] >
+/// limits[j]), so a NaN counts as not above), by vector comparisons as at_most.
+template <class T, std::size_t N>
+unsigned not_above_each(const std::array<T, N>& values, const T* limits) {
+  unsigned bits = 0;
+#if defined(__SSE2__)
+  if constexpr (std::is_same_v<T, double> && N % 2 == 0) {
+    for (std::size_t j = 0; j < N; j += 2)
+      bits |= static_cast<unsigned>(_mm_movemask_pd(_mm_cmpngt_pd(_mm_loadu_pd(values.data() + j), _mm_loadu_pd(limits + j))))
+              << j;
+    return bits;
+  } else if constexpr (std::is_same_v<T, float> && N % 4 == 0) {
+    for (std::size_t j = 0; j < N; j += 4)
+      bits |= static_cast<unsigned>(_mm_movemask_ps(_mm_cmpngt_ps(_mm_loadu_ps(values.data() + j), _mm_loadu_ps(limits + j))))
+              << j;
+    return bits;
+  }
+#endif
+  for (std::size_t j = 0; j < N; ++j) bits |= static_cast<unsigned>(!(values[j] > limits[j])) << j;
+  return bits;
+}
+
 /// The lowest set bit's position, and that bit cleared.
 inline unsigned take_lowest_bit(unsigned& bits) {
 #if defined(__GNUC__)
@@ -186,10 +208,14 @@ inline unsigned bits_set(unsigned bits) {
   return table[bits & 255u];
 }
 
-/// For each point of query leaf `id`, in order, visit(position, bound): the lower bound of its
-/// distance to box [lo, hi], worked out a block of points at a time from the leaf's columns.
-template <class Tree, class Space, class T, class Visit>
-void bounds_to_box(const Tree& queries, std::uint32_t id, const T* lo, const T* hi, const Space& space, Visit&& visit) {
+/// The points of query leaf `id` that may have a neighbour in box [lo, hi]: visit(position), in
+/// order, for each whose lower bound on its distance to the box is not above its limit, where
+/// limits(base) points to the limits of the block of points from position `base`. The bounds are
+/// worked out a block of points at a time from the leaf's columns and compared by one mask for the
+/// block (which points pass is not predictable: a branch per point would often be mispredicted).
+template <class Tree, class Space, class T, class Limits, class Visit>
+void points_near_box(const Tree& queries, std::uint32_t id, const T* lo, const T* hi, const Space& space,
+                     Limits&& limits, Visit&& visit) {
   constexpr std::size_t block = Tree::column_block;
   const auto& leaf = queries.node(id);
   const std::size_t stride = Tree::column_stride(leaf);
@@ -197,8 +223,18 @@ void bounds_to_box(const Tree& queries, std::uint32_t id, const T* lo, const T* 
   for (std::size_t start = 0; start < leaf.count(); start += block) {
     const std::array<T, block> bound = space.template lower_many<block>(columns + start, stride, lo, hi, queries.dim());
     const std::size_t count = std::min<std::size_t>(block, leaf.count() - start);
-    for (std::size_t j = 0; j < count; ++j) visit(leaf.begin + static_cast<std::uint32_t>(start + j), bound[j]);
+    const std::uint32_t base = leaf.begin + static_cast<std::uint32_t>(start);
+    unsigned near = not_above_each(bound, limits(base)) & ((1u << count) - 1);
+    while (near) visit(base + take_lowest_bit(near));
   }
+}
+
+/// A block of equal limits, for points_near_box.
+template <class T, std::size_t N>
+std::array<T, N> same_limit(T limit) {
+  std::array<T, N> limits;
+  limits.fill(limit);
+  return limits;
 }
 
 /// The query subtrees a join's work is split into, in depth-first order: the largest subtrees of at
