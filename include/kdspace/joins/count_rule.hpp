@@ -6,8 +6,8 @@
 // A node pair carries the range of bins its pairs can still fall into. Its cell bounds [lower, upper]
 // narrow that range to the bins from the first radius >= lower to the first radius >= upper; when
 // that is one bin, every pair of the two cells goes there without a distance (Moore et al. 2001,
-// "Fast algorithms and efficient statistics: N-point correlation functions"). Leaves bin their pairs
-// one by one. Self-joins count each unordered pair once, as the range rule does.
+// "Fast algorithms and efficient statistics: N-point correlation functions"). Leaves count 8 distances
+// at a time against each open radius (count_block). Self-joins count each unordered pair once.
 //
 // Weighted counts add w_a * w_b for each pair instead of 1; a pair of cells settled whole adds the
 // product of the cells' weight sums, so the float sum is taken in an order of its own (exact for
