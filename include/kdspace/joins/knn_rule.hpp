@@ -10,6 +10,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -37,13 +38,11 @@ class KnnTable {
 
   KnnTable(std::size_t n, std::size_t k)
       : k_(k), sorted_rows_(k <= sorted_rows_up_to), candidates_(n * k), sizes_(n, 0),
-        kth_(n + row_padding, std::numeric_limits<T>::infinity()) {}
+        kth_(n, std::numeric_limits<T>::infinity()) {}
 
   T kth(std::size_t i) const { return kth_[i]; }
-  /// kth(i) for the rows [first, first + row_padding) (+inf past the last row): the limits of a
-  /// block of query points (points_near_box).
+  /// kth(i) onwards from row `first`: the limits of a block of query points (points_near_box).
   const T* kths(std::size_t first) const { return kth_.data() + first; }
-  static constexpr std::size_t row_padding = 32;
 
   /// Offers a candidate to row i: kept when the row holds fewer than k or it comes before the k-th
   /// in (distance, index) order (the decision of KnnResults::offer); false when refused.
@@ -98,7 +97,6 @@ class KnnRule {
   using Tree = BoundedTree<T, Dim>;
   struct Context {};
   static constexpr bool nearest_first = true;
-  static_assert(Tree::column_block <= KnnTable<T>::row_padding, "a block of rows' k-th distances is read at once");
 
   /// `table` rows are the query tree's leaf-order positions; `node_bound` holds B(N_q) per query node
   /// (+inf to start). self: queries and reference are the same tree, and a point is not its own
@@ -128,9 +126,17 @@ class KnnRule {
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
     // The leaf's box may lie beyond a point's k-th even when it does not beyond the node's bound.
+    // A block's k-th distances are read in place, but for the leaf's last block: the rows after
+    // the leaf's may be another task's, being written.
+    constexpr std::size_t block = Tree::column_block;
+    std::array<T, block> last_block{};
+    const auto limits = [&](std::uint32_t base) {
+      if (base + block <= qn.end) return table_.kths(base);
+      for (std::uint32_t j = 0; base + j < qn.end; ++j) last_block[j] = table_.kth(base + j);
+      return static_cast<const T*>(last_block.data());
+    };
     points_near_box(
-        queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t base) { return table_.kths(base); },
-        [&](std::uint32_t i) {
+        queries_, q, reference_.lo(r), reference_.hi(r), space_, limits, [&](std::uint32_t i) {
           const T* a = queries_.point(i);
           if (rn.all_identical) {
             offer_identical(i, a, rn);
