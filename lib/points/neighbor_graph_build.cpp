@@ -10,7 +10,7 @@
 //     reaches the neighbours the windows missed, as the rounds of neighbour-of-neighbour exploration
 //     of NN-descent (Dong et al., "Efficient k-nearest neighbor graph construction for generic
 //     similarity measures", WWW 2011) and EFANNA (Fu & Cai, 2016) do, but in a best-first order that
-//     stops early. Both steps score with a kernel of their own, exact but not internal_distance()'s
+//     stops early. Both steps score with a kernel of their own, not internal_distance()'s
 //     bits: on float rows, one vector a block of 4 coordinates (BuildFloatScorer), on byte rows,
 //     integers (ByteRowScorer).
 //  3. Pruning for diversity, then reverse edges. A candidate c of point p is dropped when a kept
