@@ -6,15 +6,14 @@
 // Its sums are not internal_distance()'s (which adds in 8 lanes, then the remaining coordinates one
 // by one, so that every answer is the brute-force distance bit for bit): the build only compares
 // these distances with each other, and any fixed order gives the same graph on any thread count.
-// On 20-D and 39-D rows it takes about half the instructions of the exact kernel, whose scalar tail
-// and lane bookkeeping cost more than the arithmetic at these dimensions.
+// On 20-D and 39-D rows the exact kernel's scalar tail and lane bookkeeping cost about as much as its
+// arithmetic: with this one the build of the graph over 30,000 music frames (20-D) took 13% fewer
+// instructions in all (callgrind), for the same recall at every ef.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <limits>
-
-#include "graph_search.hpp"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
