@@ -21,7 +21,6 @@
 
 namespace kdspace::detail {
 
-#if defined(__SSE2__)
 class BuildFloatScorer {
  public:
   using Scalar = float;
@@ -29,10 +28,12 @@ class BuildFloatScorer {
 
   BuildFloatScorer(const float* rows, std::size_t dim, const float* q)
       : rows_(rows), dim_(dim), q_(q), lines_((dim * sizeof(float) + 63) / 64) {
+#if defined(__SSE2__)
     const std::size_t left = dim % 4;  // coordinates of the last block not in a full one
     alignas(16) std::int32_t lanes[4];
     for (std::size_t j = 0; j < 4; ++j) lanes[j] = left > 0 && j >= 4 - left ? -1 : 0;
     tail_mask_ = _mm_castsi128_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(lanes)));
+#endif
   }
   void prefetch(std::uint32_t row) const {
     const char* first_byte = reinterpret_cast<const char*>(rows_ + std::size_t{row} * dim_);
@@ -40,6 +41,7 @@ class BuildFloatScorer {
   }
   /// Distances of the rows ids[0, 4), or, once all four are sure to be above `limit`, values above it.
   void operator()(const std::uint32_t* ids, float limit, float* out) const {
+#if defined(__SSE2__)
     if (dim_ < 4) return scalar(ids, out);
     const float* r0 = rows_ + std::size_t{ids[0]} * dim_;
     const float* r1 = rows_ + std::size_t{ids[1]} * dim_;
@@ -72,9 +74,14 @@ class BuildFloatScorer {
       a0 = add_tail(a0, r0), a1 = add_tail(a1, r1), a2 = add_tail(a2, r2), a3 = add_tail(a3, r3);
     }
     sums(a0, a1, a2, a3, out);
+#else
+    (void)limit;
+    scalar(ids, out);
+#endif
   }
 
  private:
+#if defined(__SSE2__)
   static constexpr std::size_t coordinates_between_checks = 64;
 
   // The horizontal sums of four accumulators at once (a 4 x 4 transpose, then three adds).
@@ -82,6 +89,8 @@ class BuildFloatScorer {
     _MM_TRANSPOSE4_PS(a0, a1, a2, a3);
     _mm_storeu_ps(out, _mm_add_ps(_mm_add_ps(a0, a1), _mm_add_ps(a2, a3)));
   }
+#endif
+  // Without SSE2, and for rows of fewer than 4 coordinates.
   void scalar(const std::uint32_t* ids, float* out) const {
     for (std::size_t g = 0; g < group; ++g) {
       const float* row = rows_ + std::size_t{ids[g]} * dim_;
@@ -95,8 +104,9 @@ class BuildFloatScorer {
   std::size_t dim_;
   const float* q_;
   std::size_t lines_;
+#if defined(__SSE2__)
   __m128 tail_mask_;
-};
 #endif
+};
 
 }  // namespace kdspace::detail

@@ -101,12 +101,9 @@ class RowQueries {
   RowQueries(const U* rows, std::size_t dim) : rows_(rows), dim_(dim), widened_(std::is_same_v<U, T> ? 0 : dim) {}
   auto operator()(std::uint32_t self) {
     const U* row = rows_ + std::size_t{self} * dim_;
-#if defined(__SSE2__)
     if constexpr (std::is_same_v<U, float> && std::is_same_v<T, float>) {
       return BuildFloatScorer(rows_, dim_, row);
-    } else
-#endif
-    if constexpr (std::is_same_v<U, T>) {
+    } else if constexpr (std::is_same_v<U, T>) {
       return RowScorer<T, U>(rows_, dim_, row);
     } else {
       std::copy(row, row + dim_, widened_.begin());
