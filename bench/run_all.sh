@@ -2,6 +2,7 @@
 # Runs the whole benchmark and plots it:
 #   build/bench/bench/kdspace-bench (all point workloads, the real scans of bench/real_data/fetch.sh,
 #     the image descriptors, the Python peers)             -> bench/results/points.md, points.jsonl
+#   build/bench/bench/kdspace-scan-bench, when built       -> bench/results/scan.md, scan.jsonl
 #   build/bench/bench/kdspace-rays-bench, when built       -> bench/results/rays.md, rays.jsonl
 #   build/bench/bench/kdspace-ann-bench                     -> bench/results/ann.md, ann.jsonl
 #   bench/run_collide.sh (kdspace-collide-bench), when built -> bench/results/collide.md, collide.jsonl
@@ -104,6 +105,14 @@ else
 fi
 
 run_bench points "$points_bench" "${points_args[@]}" "$@"
+
+# Exact 128-D batches: the blocked scan against FAISS's IndexFlatL2, one thread.
+scan_bench=$build/bench/kdspace-scan-bench
+if [ -x "$scan_bench" ]; then
+  scan_args=()
+  [ -f "$images/motorcycle_right.png" ] && scan_args+=(--images "$images")
+  run_bench scan "$scan_bench" "${scan_args[@]}"
+fi
 
 if [ -x "$rays_bench" ]; then
   # The real scenes (triangle boxes and voxels of real meshes): bench/real_data/fetch.sh downloads

@@ -269,6 +269,71 @@ TEST_CASE("joins: L1 and Linf joins equal brute force flat and periodic", "[join
   }
 }
 
+// Radii at the very bounds the count rule compares with: the lower and upper bounds of pairs of the
+// join's cells (the bulk count of a pair of cells whose bounds fall within one bin, and the bin
+// boundaries of the leaves' block counts), one step either side, and many radii at once; with
+// duplicates and grids (many equal distances), weights, and on a torus.
+template <class T, class Metric>
+void check_counts_at_cell_bounds(const Case& c, bool periodic, std::uint32_t seed, kdspace::JoinStats& stats) {
+  CAPTURE(kdspace_test::name(c.shape), c.n, c.dim, periodic, Metric::name, kdspace_test::type_name<T>());
+  const Torus<T> space(boxsize_for<T>(c.shape, c.dim, periodic), c.dim);
+  std::vector<T> points = make_points<T>(c.shape, c.n, c.dim, seed);
+  space.wrap(points);
+  kdspace::BuildParams build;
+  build.leaf_size = 1 + seed % 5;
+  const PointTree<T, kdspace::Dynamic, Metric> tree(points.data(), c.n, c.dim, build);
+  JoinParams params;
+  params.threads = 1;
+  params.boxsize = space.boxsize;
+
+  const kdspace::detail::BoundedTree<T, kdspace::Dynamic> cells(tree, kdspace::detail::count_leaf_points);
+  const auto bounds = [&](const auto& torus) {
+    std::vector<T> radii;
+    const auto nodes = static_cast<std::uint32_t>(std::min<std::size_t>(cells.node_count(), 24));
+    for (std::uint32_t q = 0; q < nodes; ++q)
+      for (std::uint32_t r = q; r < nodes; r += 3) {
+        if (cells.node(q).count() == 0 || cells.node(r).count() == 0) continue;
+        for (const T b : {torus.lower(cells.lo(q), cells.hi(q), cells.lo(r), cells.hi(r), c.dim),
+                          torus.upper(cells.lo(q), cells.hi(q), cells.lo(r), cells.hi(r), c.dim)}) {
+          const T d = Metric::to_distance(b);
+          for (const T x : {d, std::nextafter(d, T(0)), std::nextafter(d, std::numeric_limits<T>::infinity())})
+            if (std::isfinite(x)) radii.push_back(x);
+        }
+      }
+    return radii;
+  };
+  const std::vector<T> radii = space.periodic()
+                                   ? bounds(kdspace::detail::TorusSpace<Metric, T>{{space.period.data()}})
+                                   : bounds(kdspace::detail::FlatSpace<Metric>{});
+  REQUIRE(!radii.empty());
+  std::vector<double> weights(c.n);
+  for (std::size_t i = 0; i < c.n; ++i) weights[i] = static_cast<double>(i % 4) - 0.5;
+  const auto counts = kdspace::count_pairs(tree, radii, params, &stats);
+  const auto sums = kdspace::count_weighted_pairs(tree, radii, weights.data(), params);
+  const auto table = DistanceTable<T>::template make<Metric>(space, points, points);
+  for (std::size_t j = 0; j < radii.size(); ++j) {
+    CAPTURE(radii[j]);
+    const auto want = brute_pairs<Metric>(table, true, radii[j]);
+    REQUIRE(counts[j] == want.size());
+    double sum = 0;  // quarters: exact in any order
+    for (const auto& p : want) sum += weights[p.a] * weights[p.b];
+    REQUIRE(sums[j] == sum);
+  }
+}
+
+TEST_CASE("joins: counts at radii equal to the cells' distance bounds equal brute force", "[joins][exact][periodic]") {
+  kdspace::JoinStats stats;
+  std::uint32_t seed = 300;
+  for (const Case& c : {cases[1], cases[2], cases[3], cases[4], cases[5]}) {
+    for (bool periodic : {false, true}) {
+      check_counts_at_cell_bounds<double, kdspace::L2>(c, periodic, seed++, stats);
+      check_counts_at_cell_bounds<float, kdspace::L1>(c, periodic, seed++, stats);
+      check_counts_at_cell_bounds<double, kdspace::Linf>(c, periodic, seed++, stats);
+    }
+  }
+  REQUIRE(stats.bulk_pairs > 0);  // pairs of cells were counted whole
+}
+
 TEST_CASE("joins: PeriodicTree answers single and batch queries like brute force on the torus", "[joins][exact][periodic]") {
   using kdspace::L2;
   for (const Case& c : {cases[1], cases[3], cases[4], cases[6], cases[8], cases[11]}) {

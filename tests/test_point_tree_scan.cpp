@@ -154,3 +154,75 @@ TEST_CASE("scan: small-integer data (the 16-bit integer path) equals brute force
     CHECK(scan_differs<double, kdspace::L2>(base, n, dim, queries, k, 1) == "");
   }
 }
+
+namespace {
+
+/// The scan itself (detail::blocked_scan_knn_l2, rows in the caller's order) with at most the given
+/// kernel, on float rows or on the same values as bytes; the first difference from brute force.
+std::string kernel_differs(const std::vector<float>& pts, std::size_t n, std::size_t dim, const std::vector<float>& queries,
+                           std::size_t k, kdspace::detail::ScanKernel widest, bool as_bytes) {
+  std::vector<std::uint32_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = static_cast<std::uint32_t>(i);
+  std::vector<float> centre(dim, 0.f);
+  for (std::size_t a = 0; a < dim; ++a) centre[a] = pts[a];  // any point near the data will do
+  const std::vector<std::uint8_t> bytes = as_bytes ? std::vector<std::uint8_t>(pts.begin(), pts.end())
+                                                   : std::vector<std::uint8_t>();
+  kdspace::detail::ScanData<float> data{as_bytes ? nullptr : pts.data(), order.data(), n, dim, centre.data(),
+                                        as_bytes ? bytes.data() : nullptr};
+  data.widest = widest;
+  const std::size_t nq = queries.size() / dim;
+  kdspace::NeighborLists<float> lists;
+  lists.neighbors.resize(nq * k);
+  for (std::size_t q = 1; q <= nq; ++q) lists.offsets.push_back(q * k);
+  kdspace::detail::blocked_scan_knn_l2(data, queries.data(), nq, k, lists.neighbors.data());
+  return kdspace_test::differs_from_brute_force<kdspace::L2>(lists, pts, n, dim, queries, k);
+}
+
+}  // namespace
+
+TEST_CASE("scan: every product kernel (AVX-512, AVX2, portable) equals brute force bit for bit",
+          "[points][exact][scan]") {
+  // Each kernel the processor has is forced in turn (wider ones fall back when it lacks them). Sizes
+  // leave partial tiles of points (n not a multiple of 32, more than one block of 1024) and of
+  // queries (37: not a multiple of 6 or 12). Data: float estimates (clustered, far from the origin:
+  // large norms and a wide bound, duplicates and all-identical points: ties broken by index) and
+  // small integers (byte values, with many ties; as float rows and as byte rows).
+  using kdspace::detail::ScanKernel;
+  const ScanKernel kernel = GENERATE(ScanKernel::avx512, ScanKernel::avx2, ScanKernel::portable);
+  const std::size_t dim = GENERATE(as<std::size_t>{}, 5, 128);
+  const std::size_t n = 2071, nq = 37;
+  struct Case {
+    const char* name;
+    Shape shape;
+    double offset;
+    int levels;  // > 0: coordinates are integers in [0, levels) instead of the shape
+  };
+  const Case c = GENERATE(Case{"clustered", Shape::clustered, 0, 0}, Case{"large norms", Shape::clustered, 3e4, 0},
+                          Case{"duplicates", Shape::duplicates, 0, 0}, Case{"identical", Shape::identical, 0, 0},
+                          Case{"bytes", Shape::uniform, 0, 256}, Case{"byte ties", Shape::uniform, 0, 3});
+  std::vector<float> pts = make_points<float>(c.shape, n, dim, 321 + static_cast<std::uint32_t>(dim));
+  std::vector<float> queries = make_queries(pts, n, dim, nq, 322);
+  if (c.levels > 0) {
+    std::mt19937 rng(323);
+    std::uniform_int_distribution<int> level(0, c.levels - 1);
+    for (auto& v : pts) v = static_cast<float>(level(rng));
+    for (auto& v : queries) v = static_cast<float>(level(rng));
+  }
+  for (auto& v : pts) v += static_cast<float>(c.offset);
+  for (auto& v : queries) v += static_cast<float>(c.offset);
+  for (std::size_t k : {std::size_t{1}, std::size_t{10}, std::size_t{97}, n}) {
+    INFO(c.name << " kernel " << static_cast<int>(kernel) << " dim " << dim << " k " << k);
+    CHECK(kernel_differs(pts, n, dim, queries, k, kernel, false) == "");
+    if (c.levels > 0) CHECK(kernel_differs(pts, n, dim, queries, k, kernel, true) == "");
+  }
+}
+
+TEST_CASE("scan: k above the number of points is an error, k equal to it is answered", "[points][exact][scan]") {
+  const auto pts = make_points<float>(Shape::uniform, 40, 64, 9);
+  const auto queries = make_queries(pts, 40, 64, 30, 10);
+  const PointTree<float> tree(pts.data(), 40, 64);
+  SearchParams sp;
+  sp.batch_method = BatchMethod::scan;
+  CHECK_THROWS_AS(tree.knn_batch(queries.data(), 30, 41, sp, 1), kdspace::Error);
+  CHECK(scan_differs<float, kdspace::L2>(pts, 40, 64, queries, 40, 1) == "");
+}

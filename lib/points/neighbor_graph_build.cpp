@@ -10,7 +10,9 @@
 //     reaches the neighbours the windows missed, as the rounds of neighbour-of-neighbour exploration
 //     of NN-descent (Dong et al., "Efficient k-nearest neighbor graph construction for generic
 //     similarity measures", WWW 2011) and EFANNA (Fu & Cai, 2016) do, but in a best-first order that
-//     stops early. On byte rows both steps score in integers (ByteRowScorer).
+//     stops early. Both steps score with a kernel of their own, not internal_distance()'s
+//     bits: on float rows, one vector a block of 4 coordinates (BuildFloatScorer), on byte rows,
+//     integers (ByteRowScorer).
 //  3. Pruning for diversity, then reverse edges. A candidate c of point p is dropped when a kept
 //     neighbour w of p is nearer to c than p is, by a factor alpha: alpha * |c - w| <= |p - c| (the
 //     relative neighbourhood rule of HNSW's heuristic and NSG for alpha = 1, relaxed by alpha > 1 as
@@ -28,6 +30,7 @@
 #include <limits>
 #include <type_traits>
 
+#include "build_distances.hpp"
 #include "graph_search.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
@@ -89,15 +92,18 @@ class CandidateLists {
   std::vector<std::uint32_t> sizes_;
 };
 
-/// The scorer of the build for a row as the query: the exact kernel on rows of T; on byte rows,
-/// integer arithmetic on the bytes (about 2.5 times fewer instructions, and as exact).
+/// The scorer of the build for a row as the query: on float rows BuildFloatScorer (build_distances.hpp);
+/// on byte rows, integer arithmetic on the bytes (about 2.5 times fewer instructions, and as exact);
+/// otherwise the queries' exact kernel.
 template <class T, class U>
 class RowQueries {
  public:
   RowQueries(const U* rows, std::size_t dim) : rows_(rows), dim_(dim), widened_(std::is_same_v<U, T> ? 0 : dim) {}
   auto operator()(std::uint32_t self) {
     const U* row = rows_ + std::size_t{self} * dim_;
-    if constexpr (std::is_same_v<U, T>) {
+    if constexpr (std::is_same_v<U, float> && std::is_same_v<T, float>) {
+      return BuildFloatScorer(rows_, dim_, row);
+    } else if constexpr (std::is_same_v<U, T>) {
       return RowScorer<T, U>(rows_, dim_, row);
     } else {
       std::copy(row, row + dim_, widened_.begin());
@@ -110,6 +116,34 @@ class RowQueries {
   std::size_t dim_;
   std::vector<std::int16_t> widened_;
 };
+
+/// Puts the `keep` first of `found` in (distance, row) order at its front. On float distances
+/// (never negative, so their bits order as unsigned integers do) each candidate is sorted as one
+/// 64-bit key, distance bits above the row: one compare instead of two branches (the windows' step
+/// took about 10% less time on 95k music frames).
+template <class T>
+void select_nearest(std::vector<Candidate<T>>& found, std::size_t keep, std::vector<std::uint64_t>& keys) {
+  if constexpr (std::is_same_v<T, float>) {
+    keys.resize(found.size());
+    for (std::size_t i = 0; i < found.size(); ++i) {
+      std::uint32_t bits;
+      std::memcpy(&bits, &found[i].dist, sizeof bits);
+      keys[i] = std::uint64_t{bits} << 32 | found[i].index;
+    }
+    const auto cut = keys.begin() + static_cast<std::ptrdiff_t>(keep);
+    if (keep < keys.size()) std::nth_element(keys.begin(), cut, keys.end());
+    std::sort(keys.begin(), cut);
+    for (std::size_t i = 0; i < keep; ++i) {
+      const std::uint32_t bits = static_cast<std::uint32_t>(keys[i] >> 32);
+      std::memcpy(&found[i].dist, &bits, sizeof bits);
+      found[i].index = static_cast<std::uint32_t>(keys[i]);
+    }
+  } else {
+    const auto cut = found.begin() + static_cast<std::ptrdiff_t>(keep);
+    if (keep < found.size()) std::nth_element(found.begin(), cut, found.end(), comes_before);
+    std::sort(found.begin(), cut, comes_before);
+  }
+}
 
 template <class T, class U>
 class GraphBuilder {
@@ -133,6 +167,7 @@ class GraphBuilder {
     std::uint32_t token = 0;
     std::vector<std::uint32_t> rows;
     std::vector<Candidate<T>> found, merged;
+    std::vector<std::uint64_t> keys;
     void start(std::size_t n) {
       if (seen.size() != n) seen.assign(n, 0), token = 0;
       if (++token == 0) std::fill(seen.begin(), seen.end(), 0u), token = 1;
@@ -173,11 +208,9 @@ class GraphBuilder {
           for (std::size_t i = first; i < first + span; ++i) w.add(order ? order[i] : static_cast<std::uint32_t>(i));
         }
         score(as_query(self), w.rows, w.found);
-        const auto keep = static_cast<std::ptrdiff_t>(std::min(w.found.size(), lists_.width()));
-        if (keep < static_cast<std::ptrdiff_t>(w.found.size()))
-          std::nth_element(w.found.begin(), w.found.begin() + keep - 1, w.found.end(), comes_before);
-        std::sort(w.found.begin(), w.found.begin() + keep, comes_before);
-        lists_.assign(p, w.found.data(), static_cast<std::size_t>(keep));
+        const std::size_t keep = std::min(w.found.size(), lists_.width());
+        select_nearest(w.found, keep, w.keys);
+        lists_.assign(p, w.found.data(), keep);
       }
     });
   }
@@ -254,8 +287,12 @@ class GraphBuilder {
     const T shrink = static_cast<T>(1.0 / (params_.alpha * params_.alpha));
     if (marks.mark.size() != n_) marks.mark.assign(n_, 0), marks.token = 0;
     if (++marks.token == 0) std::fill(marks.mark.begin(), marks.mark.end(), 0u), marks.token = 1;
+    // Each candidate's list is a read at a place of its own: asked for a few candidates ahead.
+    constexpr std::size_t ahead = 6;
+    for (std::size_t i = 0; i < std::min(count, ahead); ++i) __builtin_prefetch(lists_.list(cands[i].index));
     std::size_t kept_count = 0;
     for (std::size_t i = 0; i < count && kept_count < params_.degree; ++i) {
+      if (i + ahead < count) __builtin_prefetch(lists_.list(cands[i + ahead].index));
       const Candidate<T>& c = cands[i];
       if (c.index == self) continue;
       const T limit = c.dist * shrink;  // dismissed by w when |c - w|^2 <= |self - c|^2 / alpha^2
@@ -302,12 +339,13 @@ class GraphBuilder {
     const std::size_t most_merged = lists_.width();
     parallel_for(n_, params_.threads, chunk, [&](std::size_t begin, std::size_t end, unsigned worker) {
       std::vector<Candidate<T>> merged, kept(degree);
+      std::vector<std::uint64_t> keys;
       for (std::size_t p = begin; p < end; ++p) {
         merged.assign(pruned.begin() + static_cast<std::ptrdiff_t>(p * degree),
                       pruned.begin() + static_cast<std::ptrdiff_t>(p * degree + pruned_size[p]));
         merged.insert(merged.end(), reverse.begin() + static_cast<std::ptrdiff_t>(first_reverse[p]),
                       reverse.begin() + static_cast<std::ptrdiff_t>(first_reverse[p + 1]));
-        std::sort(merged.begin(), merged.end(), comes_before);
+        select_nearest(merged, merged.size(), keys);
         merged.erase(std::unique(merged.begin(), merged.end(),
                                  [](const Candidate<T>& a, const Candidate<T>& b) { return a.index == b.index; }),
                      merged.end());

@@ -119,6 +119,18 @@ struct TraversalRay {
   }
 };
 
+/// The children of the inner node `index` (left: index + 1, right: `right`) in the order the ray
+/// meets them, near first; `towards_negative` is 1 when the ray runs towards -axis of the node's
+/// split. Bit arithmetic, not a branch: for incoherent rays the sign on the node's axis is
+/// unpredictable, and as a branch it was the traversal's most mispredicted one (callgrind's branch
+/// simulation: 4.4 of 22 mispredictions per random ray through a scanned mesh's triangle boxes).
+inline void order_children(std::uint32_t index, std::uint32_t right, std::uint32_t towards_negative,
+                           std::uint32_t& near, std::uint32_t& far) {
+  const std::uint32_t left = index + 1, differ = (left ^ right) & (0u - towards_negative);
+  near = left ^ differ;
+  far = right ^ differ;
+}
+
 /// Narrows [t_lo, t_hi] to the part of the ray inside the closed box, widened (a superset of what
 /// the double slab test finds); false when that part is empty.
 template <class Real>
@@ -129,10 +141,12 @@ inline bool clip_widened(const Box3f& b, const TraversalRay<Real>& r, Real& t_lo
       if (r.origin[a] < lo || r.origin[a] > hi) return false;
       continue;
     }
-    Real t0 = (lo - r.origin[a]) * r.inverse[a], t1 = (hi - r.origin[a]) * r.inverse[a];
-    if (r.negative[a]) std::swap(t0, t1);
-    t_lo = std::max(t_lo, widen_down(t0));
-    t_hi = std::min(t_hi, widen_up(t1));
+    const Real t0 = (lo - r.origin[a]) * r.inverse[a], t1 = (hi - r.origin[a]) * r.inverse[a];
+    // Entered at the smaller parameter, left at the larger (neither is NaN: the direction is not 0
+    // on this axis). A min and a max, not a swap on the direction's sign: as a branch that was
+    // mispredicted 1.5 times a random ray (callgrind's branch simulation).
+    t_lo = std::max(t_lo, widen_down(std::min(t0, t1)));
+    t_hi = std::min(t_hi, widen_up(std::max(t0, t1)));
   }
   return t_lo <= t_hi;
 }

@@ -6,8 +6,8 @@
 // A node pair carries the range of bins its pairs can still fall into. Its cell bounds [lower, upper]
 // narrow that range to the bins from the first radius >= lower to the first radius >= upper; when
 // that is one bin, every pair of the two cells goes there without a distance (Moore et al. 2001,
-// "Fast algorithms and efficient statistics: N-point correlation functions"). Leaves bin their pairs
-// one by one. Self-joins count each unordered pair once, as the range rule does.
+// "Fast algorithms and efficient statistics: N-point correlation functions"). Leaves count 8 distances
+// at a time against each open radius (count_block). Self-joins count each unordered pair once.
 //
 // Weighted counts add w_a * w_b for each pair instead of 1; a pair of cells settled whole adds the
 // product of the cells' weight sums, so the float sum is taken in an order of its own (exact for
@@ -113,19 +113,31 @@ class CountRule {
   void base_case(std::uint32_t q, std::uint32_t r, const Context& context) {
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
-    const T largest = radii_[context.hi];
-    bounds_to_box(queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t i, T lower) {
-      if (lower > largest) return;
-      const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
-      stats_.distances += rn.end - first;
-      distances_to_leaf(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
-        const std::uint32_t bin = first_at_least(context.lo, context.hi, d);
-        if constexpr (std::is_same_v<Count, double>)
-          bins_[bin] += query_weights_->by_position[i] * reference_weights_->by_position[j];
-        else
-          ++bins_[bin];
-      });
-    });
+    // Pairs beyond the last radius fall in no count: the leaves bin only up to it.
+    const std::uint32_t hi = std::min(context.hi, static_cast<std::uint32_t>(radii_.size() - 2));
+    const T largest = radii_[hi];
+    if constexpr (std::is_same_v<Count, std::uint64_t>)
+      std::fill(within_.begin() + context.lo, within_.begin() + hi + 1, 0);
+    const auto limits = same_limit<T, Tree::column_block>(largest);
+    points_near_box(
+        queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t) { return limits.data(); },
+        [&](std::uint32_t i) {
+          const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
+          stats_.distances += rn.end - first;
+          if constexpr (std::is_same_v<Count, double>) {
+            distances_to_leaf(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
+              bins_[first_at_least(context.lo, hi, d)] +=
+                  query_weights_->by_position[i] * reference_weights_->by_position[j];
+            });
+          } else {
+            distance_blocks(reference_, r, first, queries_.point(i), space_,
+                            [&](const auto& dist, unsigned keep, std::uint32_t) { count_block(dist, keep, context.lo, hi); });
+          }
+        });
+    if constexpr (std::is_same_v<Count, std::uint64_t>) {
+      bins_[context.lo] += within_[context.lo];
+      for (std::uint32_t j = context.lo + 1; j <= hi; ++j) bins_[j] += within_[j] - within_[j - 1];
+    }
   }
 
  private:
@@ -141,6 +153,23 @@ class CountRule {
       n -= half;
     }
     return static_cast<std::uint32_t>(first - radii_.data());
+  }
+
+  // Adds to within_[j], for j in [lo, hi], the distances of a block (those marked in `keep`) that
+  // are at most radius j: one vector comparison per radius, instead of a search per pair; once a
+  // radius holds every pair of the block left, so do the larger ones.
+  template <class Block>
+  void count_block(const Block& dist, unsigned keep, std::uint32_t lo, std::uint32_t hi) {
+    const unsigned inside = at_most(dist, radii_[hi]) & keep;
+    if (!inside) return;
+    const std::uint64_t all = bits_set(inside);
+    std::uint32_t j = lo;
+    for (; j < hi; ++j) {
+      const unsigned near = at_most(dist, radii_[j]) & inside;
+      within_[j] += bits_set(near);
+      if (near == inside) break;
+    }
+    for (j = j < hi ? j + 1 : hi; j <= hi; ++j) within_[j] += all;
   }
 
   template <class Node>
@@ -166,6 +195,8 @@ class CountRule {
   const NodeWeights* reference_weights_;
   std::vector<Count>& bins_;
   JoinStats& stats_;
+  // A leaf pair's pairs within each radius (count_block).
+  std::vector<std::uint64_t> within_ = std::vector<std::uint64_t>(radii_.size());
 };
 
 }  // namespace kdspace::detail

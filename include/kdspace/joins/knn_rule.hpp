@@ -10,6 +10,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -40,6 +41,8 @@ class KnnTable {
         kth_(n, std::numeric_limits<T>::infinity()) {}
 
   T kth(std::size_t i) const { return kth_[i]; }
+  /// kth(i) onwards from row `first`: the limits of a block of query points (points_near_box).
+  const T* kths(std::size_t first) const { return kth_.data() + first; }
 
   /// Offers a candidate to row i: kept when the row holds fewer than k or it comes before the k-th
   /// in (distance, index) order (the decision of KnnResults::offer); false when refused.
@@ -119,25 +122,34 @@ class KnnRule {
   bool rescore(std::uint32_t q, std::uint32_t, T key) const { return !(key > node_bound_[q]); }
 
   void base_case(std::uint32_t q, std::uint32_t r, const Context&) {
+    const auto& qn = queries_.node(q);
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
-    T leaf_bound = 0;
-    bounds_to_box(queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t i, T lower) {
-      T kth = table_.kth(i);
-      // The leaf's box may lie beyond this point's k-th even when it does not beyond the node's bound.
-      if (!(lower > kth)) {
-        const T* a = queries_.point(i);
-        if (rn.all_identical) {
-          kth = offer_identical(i, a, rn);
-        } else {
+    // The leaf's box may lie beyond a point's k-th even when it does not beyond the node's bound.
+    // A block's k-th distances are read in place, but for the leaf's last block: the rows after
+    // the leaf's may be another task's, being written.
+    constexpr std::size_t block = Tree::column_block;
+    std::array<T, block> last_block{};
+    const auto limits = [&](std::uint32_t base) {
+      if (base + block <= qn.end) return table_.kths(base);
+      for (std::uint32_t j = 0; base + j < qn.end; ++j) last_block[j] = table_.kth(base + j);
+      return static_cast<const T*>(last_block.data());
+    };
+    points_near_box(
+        queries_, q, reference_.lo(r), reference_.hi(r), space_, limits, [&](std::uint32_t i) {
+          const T* a = queries_.point(i);
+          if (rn.all_identical) {
+            offer_identical(i, a, rn);
+            return;
+          }
+          T kth = table_.kth(i);
           stats_.distances += rn.count();
           distances_to_leaf(reference_, r, rn.begin, a, space_, kth, [&](std::uint32_t j, T d) {
             if (d <= kth && !(same_leaf && j == i) && table_.offer(i, d, reference_.index(j))) kth = table_.kth(i);
           });
-        }
-      }
-      leaf_bound = std::max(leaf_bound, kth);
-    });
+        });
+    T leaf_bound = 0;
+    for (std::uint32_t i = qn.begin; i < qn.end; ++i) leaf_bound = std::max(leaf_bound, table_.kth(i));
     node_bound_[q] = leaf_bound;
   }
 
@@ -156,14 +168,13 @@ class KnnRule {
 
   // A leaf of coinciding points: one distance serves all, and as their indices ascend the first
   // refusal ends the offers.
-  T offer_identical(std::uint32_t i, const T* a, const typename Tree::Node& rn) {
+  void offer_identical(std::uint32_t i, const T* a, const typename Tree::Node& rn) {
     const T d = space_.distance(a, reference_.point(rn.begin), dim());
     ++stats_.distances;
     for (std::uint32_t j = rn.begin; j < rn.end; ++j) {
       if (self_ && j == i) continue;
       if (!table_.offer(i, d, reference_.index(j))) break;
     }
-    return table_.kth(i);
   }
 
   const Tree& queries_;

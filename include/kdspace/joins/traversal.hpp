@@ -129,6 +129,28 @@ unsigned at_most(const std::array<T, N>& values, T limit) {
   return bits;
 }
 
+/// The bits of the values of a block that are not above their own limits (bit j: !(values[j] >
+/// limits[j]), so a NaN counts as not above), by vector comparisons as at_most.
+template <class T, std::size_t N>
+unsigned not_above_each(const std::array<T, N>& values, const T* limits) {
+  unsigned bits = 0;
+#if defined(__SSE2__)
+  if constexpr (std::is_same_v<T, double> && N % 2 == 0) {
+    for (std::size_t j = 0; j < N; j += 2)
+      bits |= static_cast<unsigned>(_mm_movemask_pd(_mm_cmpngt_pd(_mm_loadu_pd(values.data() + j), _mm_loadu_pd(limits + j))))
+              << j;
+    return bits;
+  } else if constexpr (std::is_same_v<T, float> && N % 4 == 0) {
+    for (std::size_t j = 0; j < N; j += 4)
+      bits |= static_cast<unsigned>(_mm_movemask_ps(_mm_cmpngt_ps(_mm_loadu_ps(values.data() + j), _mm_loadu_ps(limits + j))))
+              << j;
+    return bits;
+  }
+#endif
+  for (std::size_t j = 0; j < N; ++j) bits |= static_cast<unsigned>(!(values[j] > limits[j])) << j;
+  return bits;
+}
+
 /// The lowest set bit's position, and that bit cleared.
 inline unsigned take_lowest_bit(unsigned& bits) {
 #if defined(__GNUC__)
@@ -142,34 +164,58 @@ inline unsigned take_lowest_bit(unsigned& bits) {
 }
 
 /// The distances from point `a` to the points [first, leaf.end) of reference leaf `id`, computed a
-/// block at a time from the leaf's columns (vector instructions); visit(position, distance) for
-/// those at most `limit` (re-read before each block: a k-NN join lowers it as it goes), in order.
+/// block at a time from the leaf's columns (vector instructions): visit(distances, keep, base) for
+/// each block, where bit j of `keep` marks the positions base + j in [first, leaf.end) (positions
+/// before `first` in the first block, and the padding past the end in the last, are masked off).
 template <class Tree, class Space, class T, class Visit>
-void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
-                       const T& limit, Visit&& visit) {
+void distance_blocks(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
+                     Visit&& visit) {
   constexpr std::size_t block = Tree::column_block;
   const auto& leaf = reference.node(id);
   const std::size_t stride = Tree::column_stride(leaf);
   const T* columns = reference.columns(id);
   std::size_t start = (first - leaf.begin) / block * block;
-  // Positions before `first` in the first block, and past the end in the last, are masked off.
   unsigned keep = ~0u << (first - leaf.begin - start);
   for (; start < leaf.count(); start += block, keep = ~0u) {
     const std::array<T, block> dist = space.template distances<block>(a, columns + start, stride, reference.dim());
     if (leaf.count() - start < block) keep &= (1u << (leaf.count() - start)) - 1;
+    visit(dist, keep, leaf.begin + static_cast<std::uint32_t>(start));
+  }
+}
+
+/// distance_blocks, point by point: visit(position, distance) for the points at most `limit`
+/// (re-read before each block: a k-NN join lowers it as it goes), in order.
+template <class Tree, class Space, class T, class Visit>
+void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
+                       const T& limit, Visit&& visit) {
+  distance_blocks(reference, id, first, a, space, [&](const auto& dist, unsigned keep, std::uint32_t base) {
     unsigned near = at_most(dist, limit) & keep;
-    const std::uint32_t base = leaf.begin + static_cast<std::uint32_t>(start);
     while (near) {
       const unsigned j = take_lowest_bit(near);
       visit(base + j, dist[j]);
     }
-  }
+  });
 }
 
-/// For each point of query leaf `id`, in order, visit(position, bound): the lower bound of its
-/// distance to box [lo, hi], worked out a block of points at a time from the leaf's columns.
-template <class Tree, class Space, class T, class Visit>
-void bounds_to_box(const Tree& queries, std::uint32_t id, const T* lo, const T* hi, const Space& space, Visit&& visit) {
+/// The number of set bits of a block's mask of at most 8 bits (a table: the popcnt instruction is
+/// not part of baseline x86-64).
+inline unsigned bits_set(unsigned bits) {
+  static constexpr auto table = [] {
+    std::array<unsigned char, 256> t{};
+    for (unsigned v = 1; v < 256; ++v) t[v] = static_cast<unsigned char>(t[v >> 1] + (v & 1u));
+    return t;
+  }();
+  return table[bits & 255u];
+}
+
+/// The points of query leaf `id` that may have a neighbour in box [lo, hi]: visit(position), in
+/// order, for each whose lower bound on its distance to the box is not above its limit, where
+/// limits(base) points to the limits of the block of points from position `base`. The bounds are
+/// worked out a block of points at a time from the leaf's columns and compared by one mask for the
+/// block (which points pass is not predictable: a branch per point would often be mispredicted).
+template <class Tree, class Space, class T, class Limits, class Visit>
+void points_near_box(const Tree& queries, std::uint32_t id, const T* lo, const T* hi, const Space& space,
+                     Limits&& limits, Visit&& visit) {
   constexpr std::size_t block = Tree::column_block;
   const auto& leaf = queries.node(id);
   const std::size_t stride = Tree::column_stride(leaf);
@@ -177,8 +223,18 @@ void bounds_to_box(const Tree& queries, std::uint32_t id, const T* lo, const T* 
   for (std::size_t start = 0; start < leaf.count(); start += block) {
     const std::array<T, block> bound = space.template lower_many<block>(columns + start, stride, lo, hi, queries.dim());
     const std::size_t count = std::min<std::size_t>(block, leaf.count() - start);
-    for (std::size_t j = 0; j < count; ++j) visit(leaf.begin + static_cast<std::uint32_t>(start + j), bound[j]);
+    const std::uint32_t base = leaf.begin + static_cast<std::uint32_t>(start);
+    unsigned near = not_above_each(bound, limits(base)) & ((1u << count) - 1);
+    while (near) visit(base + take_lowest_bit(near));
   }
+}
+
+/// A block of equal limits, for points_near_box.
+template <class T, std::size_t N>
+std::array<T, N> same_limit(T limit) {
+  std::array<T, N> limits;
+  limits.fill(limit);
+  return limits;
 }
 
 /// The query subtrees a join's work is split into, in depth-first order: the largest subtrees of at

@@ -2,7 +2,8 @@
 // would visit most leaves anyway (high dimensions, uniform data).
 //
 // Points go through in blocks, each against every block of queries, as one matrix product
-// (lib/points/blocked_scan.cpp: a register-blocked kernel for AVX2, chosen at run time, or Eigen).
+// (lib/points/blocked_scan.cpp: register-blocked kernels for AVX-512 and AVX2, chosen at run time,
+// or Eigen).
 // Small-integer data (bytes, SIFT descriptors; every coordinate of points and queries an integer
 // and the squared extents adding up to less than 2^24) is multiplied in 16-bit integers: the
 // distances |x|^2 + |q|^2 - 2 x.q are then exact, and equal to internal_distance() bit for bit.
@@ -22,6 +23,20 @@
 
 namespace kdspace::detail {
 
+/// Where one call's time went (kdspace-scan-bench): filled when ScanData::profile is set.
+struct ScanProfile {
+  double check_s = 0;      ///< the checks of the data: small integers? estimates at risk of overflow?
+  double prepare_s = 0;    ///< converting and packing the point blocks, their norms
+  double product_s = 0;    ///< the products with the bound test fused in, and keeping the candidates
+  double recheck_s = 0;    ///< exact distances of the candidates, the final ranking
+  std::size_t candidates = 0;  ///< points kept for the re-check (or offered to the k-NN heaps)
+  bool integer_path = false;   ///< small-integer data: exact 16-bit products, no re-check
+};
+
+/// The product kernels, widest first: each call uses the widest the processor has, but not wider
+/// than ScanData::widest (so that tests reach every kernel on any processor).
+enum class ScanKernel { avx512, avx2, portable };
+
 /// The points as the tree holds them: leaf-ordered rows and each row's original index.
 template <class T>
 struct ScanData {
@@ -31,6 +46,8 @@ struct ScanData {
   std::size_t dim;
   const T* centre;              ///< dim coordinates near the middle of the data
   const std::uint8_t* bytes = nullptr;  ///< or the rows as bytes (PointForest's compact storage)
+  ScanProfile* profile = nullptr;       ///< where to add up the time of each phase, when not null
+  ScanKernel widest = ScanKernel::avx512;  ///< the widest kernel allowed
 };
 
 /// Exact k-NN (L2, 1 <= k <= n) of queries[0 .. nq) (row-major); out[q * k + i] is the i-th
