@@ -1100,6 +1100,21 @@ TEST_CASE("exact: knn_batch and radius_batch on 1, 2 and 4 threads give the sing
   bad.done();
 }
 
+TEST_CASE("exact: knn_batch on a tree larger than the caches, its queries reordered by leaf, gives the single-query answers",
+          "[points][exact][threads]") {
+  // A batch visits its queries in leaf order only when the tree outgrows the caches (8 MiB): this
+  // tree of 600k 3-D points is the one here that does.
+  const Case c{Shape::clustered, 600000, 3, 14700};
+  const auto pts = make_points<float>(c.shape, c.n, c.dim, c.seed);
+  const auto queries = make_queries<float>(c.shape, pts, c.n, c.dim, 300, c.seed + 1);
+  const PointTree<float> tree(pts.data(), c.n, c.dim);
+  REQUIRE(tree.memory_bytes() > (std::size_t{8} << 20));
+  Mismatches bad;
+  for (std::size_t k : {1, 10})
+    batch_knn_matches_single(tree, queries, k, SearchParams{}, describe<float, kdspace::L2>(c), bad);
+  bad.done();
+}
+
 TEST_CASE("exact: knn_batch with max_checks answers each query as knn with the same max_checks does",
           "[points][exact][threads][approximate]") {
   const Case c{Shape::uniform, 3000, 3, 14500};
