@@ -15,6 +15,7 @@
 #include "kdspace/collide/moving_scene.hpp"
 #include "kdspace/collide/overlap.hpp"
 #include "kdspace/error.hpp"
+#include "kdspace/rays/scene_gen.hpp"
 #include "support.hpp"
 
 using kdspace::Box3f;
@@ -266,5 +267,29 @@ TEST_CASE("moving scene: the same pairs on 1, 2 and 4 threads", "[collide][movin
     }
     CHECK(answers[1] == answers[0]);
     CHECK(answers[2] == answers[0]);
+  }
+}
+
+// A refit that moves a box beyond the float traversal's range (2^62) must switch the tree to the
+// double traversal, as a build over those boxes does: the hits equal a fresh build's, also for rays
+// whose parameters reach that box only beyond the float range.
+TEST_CASE("moving: a refit beyond the float range traces as a fresh build does", "[refit][rays]") {
+  std::vector<Box3f> boxes = kdspace::generate_boxes(800, kdspace::SceneKind::clustered, 31);
+  BoxTree tree(boxes);
+  boxes[5] = Box3f{{1e25f, 1e25f, 1e25f}, {2e25f, 2e25f, 2e25f}};
+  REQUIRE(tree.refit(boxes.data(), boxes.size()));
+  const BoxTree fresh(boxes);
+  std::vector<kdspace::Ray> rays = kdspace::random_rays(2000, Box3f{{0, 0, 0}, {1, 1, 1}}, 32);
+  for (const float tiny : {1e-7f, 1e-19f, 1e-25f}) {
+    rays.push_back(kdspace::Ray{{0.5f, 0.5f, 0.5f}, {1, 1, 1}});
+    rays.push_back(kdspace::Ray{{0, 0, 0}, {tiny, tiny, tiny}});
+    rays.push_back(kdspace::Ray{{0.5f, 0.5f, 0.5f}, {tiny, 1, tiny}});
+  }
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const kdspace::Hit a = tree.closest_hit(rays[i]), b = fresh.closest_hit(rays[i]);
+    INFO("ray " << i);
+    REQUIRE(a.box == b.box);
+    REQUIRE(a.t == b.t);
+    REQUIRE(tree.any_hit(rays[i]).hit() == fresh.any_hit(rays[i]).hit());
   }
 }
