@@ -50,6 +50,7 @@
 #include "kdspace/error.hpp"
 #include "kdspace/metric.hpp"
 #include "kdspace/points/detail/input_checks.hpp"
+#include "kdspace/points/detail/neighbor_output.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
 #include "kdspace/points/neighbor.hpp"
@@ -436,7 +437,7 @@ class DynamicPointTree {
     detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
     QueryStats local;
     search_parts(*snap, q, results, params, local);
-    return finish(results.sorted(), stats, local);
+    return detail::finish_query(metric_, results.sorted(), stats, local);
   }
 
   /// Every live point within distance r of q (closed ball), ascending distance then id; with
@@ -450,7 +451,7 @@ class DynamicPointTree {
     std::vector<detail::Candidate<T>> scratch;
     QueryStats local;
     radius_into(*snap, q, metric_.to_internal(r), max_results, scratch, local);
-    return finish(scratch, stats, local);
+    return detail::finish_query(metric_, scratch, stats, local);
   }
 
   /// Ids of the live points p with lo <= p <= hi on every axis, ascending.
@@ -509,11 +510,11 @@ class DynamicPointTree {
         detail::KnnResults<T> results(k, std::numeric_limits<T>::infinity(), scratch);
         QueryStats local;
         search_parts(*snap, queries + q * dim(), results, params, local);
-        write(results.sorted(), out.neighbors.data() + q * k);
+        detail::write_neighbors(metric_, results.sorted(), out.neighbors.data() + q * k);
         per_worker[worker] += local;
       }
     });
-    sum_stats(per_worker, stats);
+    detail::sum_stats(per_worker, stats);
     return out;
   }
 
@@ -531,7 +532,7 @@ class DynamicPointTree {
       for (std::size_t q = begin; q < end; ++q) {
         radius_into(*snap, queries + q * dim(), limit, max_results, scratch, per_worker[worker]);
         rows[q].resize(scratch.size());
-        write(scratch, rows[q].data());
+        detail::write_neighbors(metric_, scratch, rows[q].data());
       }
     });
     NeighborLists<T> out;
@@ -539,7 +540,7 @@ class DynamicPointTree {
     for (std::size_t q = 0; q < nq; ++q) out.offsets[q + 1] = out.offsets[q] + rows[q].size();
     out.neighbors.reserve(out.offsets[nq]);
     for (auto& row : rows) out.neighbors.insert(out.neighbors.end(), row.begin(), row.end());
-    sum_stats(per_worker, stats);
+    detail::sum_stats(per_worker, stats);
     return out;
   }
 
@@ -793,21 +794,6 @@ class DynamicPointTree {
     for (const Part& p : snap->parts)
       total = max ? std::max(total, figure(*p.tree)) : total + figure(*p.tree);
     return total;
-  }
-
-  std::vector<Neighbor<T>> finish(const std::vector<detail::Candidate<T>>& sorted, QueryStats* stats,
-                                  const QueryStats& local) const {
-    std::vector<Neighbor<T>> out(sorted.size());
-    write(sorted, out.data());
-    if (stats) *stats += local;
-    return out;
-  }
-  void write(const std::vector<detail::Candidate<T>>& sorted, Neighbor<T>* out) const {
-    for (const auto& c : sorted) *out++ = Neighbor<T>{c.index, metric_.to_distance(c.dist)};
-  }
-  static void sum_stats(const std::vector<QueryStats>& per_worker, QueryStats* stats) {
-    if (!stats) return;
-    for (const auto& s : per_worker) *stats += s;
   }
 
   std::size_t dim_;

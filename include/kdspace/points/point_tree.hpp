@@ -32,6 +32,7 @@
 #include "kdspace/points/detail/blocked_scan.hpp"
 #include "kdspace/points/detail/builder.hpp"
 #include "kdspace/points/detail/input_checks.hpp"
+#include "kdspace/points/detail/neighbor_output.hpp"
 #include "kdspace/points/detail/node.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
@@ -179,7 +180,7 @@ class PointTree {
     QueryStats local;
     return detail::with_knn_results(k, std::numeric_limits<T>::infinity(), scratch, [&](auto& results) {
       run(q, results, params, local);
-      return finish(results.sorted(), stats, local);
+      return detail::finish_query(metric_, results.sorted(), stats, local);
     });
   }
 
@@ -192,7 +193,7 @@ class PointTree {
     std::vector<detail::Candidate<T>> scratch;
     QueryStats local;
     radius_into(q, metric_.to_internal(r), max_results, scratch, local);
-    return finish(scratch, stats, local);
+    return detail::finish_query(metric_, scratch, stats, local);
   }
 
   /// Indices of the points p with lo <= p <= hi on every axis (closed box), ascending.
@@ -231,7 +232,7 @@ class PointTree {
         for (std::size_t i = begin; i < end; ++i)
           detail::with_knn_results(k, std::numeric_limits<T>::infinity(), scratch, [&, q = visit[i]](auto& results) {
             run(queries + q * dim(), results, params, per_worker[worker]);
-            write(results.sorted(), out.neighbors.data() + q * k);
+            detail::write_neighbors(metric_, results.sorted(), out.neighbors.data() + q * k);
           });
       });
     };
@@ -245,7 +246,7 @@ class PointTree {
       // Always the same queries, so the choice does not depend on the thread count.
       by_tree(0, probe_queries);
       QueryStats probe;
-      sum_stats(per_worker, &probe);
+      detail::sum_stats(per_worker, &probe);
       const double scored = static_cast<double>(probe.points_visited) / static_cast<double>(probe_queries * size());
       first_scanned = scored >= scan_switch_fraction ? probe_queries : nq;
       if (first_scanned == nq) by_tree(probe_queries, nq);
@@ -253,7 +254,7 @@ class PointTree {
       by_tree(0, nq);
     }
     if (first_scanned < nq) scan_batch(queries, first_scanned, nq, k, out.neighbors.data(), threads, per_worker);
-    sum_stats(per_worker, stats);
+    detail::sum_stats(per_worker, stats);
     return out;
   }
 
@@ -272,7 +273,7 @@ class PointTree {
         const std::size_t q = visit[i];
         radius_into(queries + q * dim(), limit, max_results, scratch, per_worker[worker]);
         rows[q].resize(scratch.size());
-        write(scratch, rows[q].data());
+        detail::write_neighbors(metric_, scratch, rows[q].data());
       }
     });
     NeighborLists<T> out;
@@ -280,7 +281,7 @@ class PointTree {
     for (std::size_t q = 0; q < nq; ++q) out.offsets[q + 1] = out.offsets[q] + rows[q].size();
     out.neighbors.reserve(out.offsets[nq]);
     for (auto& row : rows) out.neighbors.insert(out.neighbors.end(), row.begin(), row.end());
-    sum_stats(per_worker, stats);
+    detail::sum_stats(per_worker, stats);
     return out;
   }
 
@@ -543,7 +544,7 @@ class PointTree {
           const T* p = points_.data();
           for (std::size_t i = 0; i < size(); ++i, p += d)
             results.offer(internal_distance(metric_, queries + q * d, p, d), order_[i]);
-          write(results.sorted(), out + q * k);
+          detail::write_neighbors(metric_, results.sorted(), out + q * k);
         }
       }
       per_worker[worker].queries += count;
@@ -569,24 +570,6 @@ class PointTree {
     const std::uint32_t axis = node.axis();
     if (lo[axis] <= node.left_max) search_box(id + 1, lo, hi, found, stats);
     if (hi[axis] >= node.right_min) search_box(node.right_child(), lo, hi, found, stats);
-  }
-
-  std::vector<Neighbor<T>> finish(const std::vector<detail::Candidate<T>>& sorted, QueryStats* stats,
-                                  const QueryStats& local) const {
-    std::vector<Neighbor<T>> out(sorted.size());
-    write(sorted, out.data());
-    if (stats) *stats += local;
-    return out;
-  }
-
-  // Converts to true distances, keeping the order of the internal ones (see the top of this file).
-  void write(const std::vector<detail::Candidate<T>>& sorted, Neighbor<T>* out) const {
-    for (const auto& c : sorted) *out++ = Neighbor<T>{c.index, metric_.to_distance(c.dist)};
-  }
-
-  static void sum_stats(const std::vector<QueryStats>& per_worker, QueryStats* stats) {
-    if (!stats) return;
-    for (const auto& s : per_worker) *stats += s;
   }
 
   // The queries [first, last) of a batch in the order a batch visits them: by the leaf each one's
