@@ -10,6 +10,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <numeric>
 #include <random>
 #include <sstream>
@@ -318,7 +320,7 @@ inline std::vector<kdspace::Box3f> make_collision_scene(CollisionScene kind, std
   return boxes;
 }
 
-// ---- files (test_io.cpp, test_rays_io.cpp) ------------------------------------------------------
+// ---- files (test_io.cpp, test_rays_io.cpp, test_index_*.cpp) ---------------------------------------
 
 /// A scratch directory for one test, removed afterwards: <base>/<prefix><process id>, where base is
 /// the temporary directory, or (in_memory) /dev/shm where there is one: for tests that write many
@@ -344,6 +346,18 @@ class ScratchDir {
  private:
   std::filesystem::path dir_;
 };
+
+/// The whole content of a file ({} when it cannot be opened).
+inline std::vector<unsigned char> file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::vector<unsigned char>(std::istreambuf_iterator<char>(in), {});
+}
+
+/// Replaces a file's content.
+inline void write_bytes(const std::string& path, const std::vector<unsigned char>& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+}
 
 }  // namespace kdspace_test
 

@@ -20,12 +20,16 @@
 #include "../lib/io/crc32c.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/io/index.hpp"
+#include "catch_support.hpp"
 #include "support.hpp"
 
 namespace fs = std::filesystem;
 namespace io = kdspace::io;
 using kdspace::PointTree;
+using kdspace_test::error_message;
+using kdspace_test::file_bytes;
 using kdspace_test::Shape;
+using kdspace_test::write_bytes;
 
 namespace {
 
@@ -34,27 +38,6 @@ class TempDir : public kdspace_test::ScratchDir {
   TempDir() : ScratchDir("kdspace-index-test-", true) {}
 };
 
-std::vector<unsigned char> file_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::vector<unsigned char>(std::istreambuf_iterator<char>(in), {});
-}
-
-void write_bytes(const std::string& path, const std::vector<unsigned char>& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-}
-
-// The message of the kdspace::Error that f throws; "" (and a failed check) when it throws none.
-template <class F>
-std::string error_message(F&& f) {
-  try {
-    f();
-  } catch (const kdspace::Error& e) {
-    return e.what();
-  }
-  FAIL_CHECK("no kdspace::Error was thrown");
-  return "";
-}
 
 template <class Tree>
 void require_same_nodes(const Tree& a, const Tree& b) {

@@ -20,19 +20,11 @@
 namespace io = kdspace::io;
 using kdspace::BoxTree;
 using kdspace::PointForest;
+using kdspace_test::file_bytes;
 using kdspace_test::Shape;
+using kdspace_test::write_bytes;
 
 namespace {
-
-std::vector<unsigned char> file_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::vector<unsigned char>(std::istreambuf_iterator<char>(in), {});
-}
-
-void write_bytes(const std::string& path, const std::vector<unsigned char>& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-}
 
 // Loads the file after every single-byte change: each must throw an Error naming the file.
 template <class Load>

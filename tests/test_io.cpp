@@ -14,6 +14,7 @@
 
 #include "kdspace/error.hpp"
 #include "kdspace/io/vectors.hpp"
+#include "catch_support.hpp"
 #include "support.hpp"
 
 namespace fs = std::filesystem;
@@ -21,6 +22,7 @@ using Catch::Contains;
 using Catch::StartsWith;
 using kdspace::io::Matrix;
 using kdspace::io::RaggedRows;
+using kdspace_test::error_message;
 namespace io = kdspace::io;
 
 namespace {
@@ -74,17 +76,6 @@ Matrix<T> matrix(std::size_t rows, std::size_t cols, std::vector<T> data) {
   return Matrix<T>{rows, cols, std::move(data)};
 }
 
-// The message of the kdspace::Error that f throws; a failed check when it throws none.
-template <class F>
-std::string error_message(F&& f) {
-  try {
-    f();
-  } catch (const kdspace::Error& e) {
-    return e.what();
-  }
-  FAIL_CHECK("no kdspace::Error was thrown");
-  return "";
-}
 
 // The start of a message about `where` ("row 3", "header") in `path`.
 std::string at(const std::string& path, const std::string& where) { return path + ": " + where + ": "; }

@@ -30,6 +30,7 @@
 #include "kdspace/metric.hpp"
 #include "kdspace/points/brute_force.hpp"
 #include "kdspace/points/point_tree.hpp"
+#include "catch_support.hpp"
 #include "support.hpp"
 
 using kdspace::AxisRule;
@@ -45,6 +46,7 @@ namespace {
 
 // ---- data ---------------------------------------------------------------------------------------
 
+using kdspace_test::error_message;
 using kdspace_test::make_points;
 using kdspace_test::name;
 using kdspace_test::Shape;
@@ -544,18 +546,6 @@ void approximate_within_bound(const Case& c, const std::vector<BuildParams>& con
 const std::vector<Shape> kEveryShape = {Shape::uniform,   Shape::clustered, Shape::duplicates, Shape::grid,
                                         Shape::identical, Shape::flat,      Shape::sorted_x};
 
-/// Reads what an Error says; other outcomes are named so that a Contains() matcher fails on them.
-template <class F>
-std::string error_message(F&& f) {
-  try {
-    f();
-  } catch (const kdspace::Error& e) {
-    return e.what();
-  } catch (const std::exception& e) {
-    return std::string("<not a kdspace::Error: ") + e.what() + ">";
-  }
-  return "<no exception>";
-}
 
 /// A minimal matrix: rows(), cols() and (i, j), stored row-major or column-major.
 struct TinyMatrix {
