@@ -96,6 +96,19 @@ TEST_CASE("index: CRC-32C has the standard check value, in hardware and in softw
     }
 }
 
+TEST_CASE("index: the CRC-32C of two ranges combines into the CRC-32C of both", "[index]") {
+  std::mt19937 rng(5);
+  std::vector<unsigned char> data(70000);
+  for (auto& b : data) b = static_cast<unsigned char>(rng());
+  for (std::size_t split : {0, 1, 8, 4096, 12289, 69999, 70000}) {
+    CAPTURE(split);
+    const std::uint32_t a = io::detail::crc32c(data.data(), split);
+    const std::uint32_t b = io::detail::crc32c(data.data() + split, data.size() - split);
+    REQUIRE(io::detail::crc32c_combine(a, b, data.size() - split) ==
+            io::detail::crc32c(data.data(), data.size()));
+  }
+}
+
 TEMPLATE_TEST_CASE("index: a saved point tree loads, mapped or read, with the same nodes and answers",
                    "[index]", float, double) {
   using T = TestType;
@@ -288,6 +301,83 @@ TEST_CASE(
   }
   CHECK(refused > 1000);
   CHECK(loaded > 100);  // changes of coordinates that keep the tree sound
+}
+
+TEST_CASE("index: a large file, checked in chunks on two threads, still catches every damaged chunk",
+          "[index][errors]") {
+  // Sections of several 256 KiB checksum chunks, and a tree large enough that its point order is
+  // checked on a second thread: a byte changed at either side of every chunk boundary, in the middle
+  // of every chunk and at the ends of every section is caught, mapped and read.
+  TempDir tmp;
+  const std::size_t n = std::size_t{3} << 16;  // above kdspace::detail::parallel_order_check
+  REQUIRE(n >= kdspace::detail::parallel_order_check);
+  const auto points = kdspace_test::make_points<float>(Shape::uniform, n, 3, 8);
+  const PointTree<float> tree(points.data(), n, 3);
+  const std::string path = tmp.file("large.kdx");
+  io::save(path, tree);
+  const auto info = io::IndexFile::open(path)->info();
+  std::vector<std::uint64_t> spots;
+  for (const io::SectionEntry& s : info.sections) {
+    spots.push_back(s.offset);
+    spots.push_back(s.offset + s.length - 1);
+    for (std::uint64_t at = 0; at < s.length; at += 1u << 17) spots.push_back(s.offset + at);
+    for (std::uint64_t at = std::uint64_t{1} << 18; at < s.length; at += 1u << 18) {
+      spots.push_back(s.offset + at - 1);
+      spots.push_back(s.offset + at);
+    }
+  }
+  REQUIRE(spots.size() > 20);
+  std::fstream file(path, std::ios::binary | std::ios::in | std::ios::out);
+  auto change = [&file](std::uint64_t at) {
+    file.seekg(static_cast<std::streamoff>(at));
+    const int old = file.get();
+    file.seekp(static_cast<std::streamoff>(at));
+    file.put(static_cast<char>(old ^ 0x10));
+    file.flush();
+  };
+  for (std::uint64_t at : spots) {
+    CAPTURE(at);
+    change(at);
+    for (auto mode : {io::LoadMode::map, io::LoadMode::read})
+      REQUIRE(error_message([&] { io::load_point_tree<float>(path, mode); }).find("checksum mismatch") !=
+              std::string::npos);
+    change(at);  // back as it was
+  }
+  const auto loaded = io::load_point_tree<float>(path);
+  require_same_nodes(loaded, tree);
+}
+
+TEST_CASE("index: a point order that is no permutation is named, in a tree checked on two threads",
+          "[index][errors]") {
+  // With every checksum resealed, only the structural checks stand in the way: the message names the
+  // first index that is out of range or given twice, as the one-thread check did.
+  const std::size_t n = kdspace::detail::parallel_order_check + 1000;
+  const auto points = kdspace_test::make_points<float>(Shape::clustered, n, 3, 9);
+  const PointTree<float> tree(points.data(), n, 3);
+  TempDir tmp;
+  const std::string path = tmp.file("order.kdx");
+  io::save(path, tree);
+  const std::vector<unsigned char> bytes = file_bytes(path);
+  const io::SectionEntry order = *io::IndexFile::open(path)->find(io::SectionType::order);
+  auto with_order = [&](std::size_t i, std::uint32_t value) {
+    std::vector<unsigned char> changed = bytes;
+    std::memcpy(changed.data() + order.offset + 4 * i, &value, 4);
+    io::reseal_index_bytes(changed);
+    write_bytes(path, changed);
+    return error_message([&] { io::load_point_tree<float>(path); });
+  };
+  auto value_at = [&](std::size_t i) {
+    std::uint32_t v;
+    std::memcpy(&v, bytes.data() + order.offset + 4 * i, 4);
+    return v;
+  };
+  CHECK(with_order(n - 1, static_cast<std::uint32_t>(n)) ==
+        path + ": point tree: index " + std::to_string(n - 1) + " of the point order is " +
+            std::to_string(n) + " (out of range)");
+  const std::size_t later = n / 2;  // the values of a permutation differ: value_at(later) != value_at(5)
+  CHECK(with_order(later, value_at(5)) == path + ": point tree: index " + std::to_string(later) +
+                                              " of the point order is " + std::to_string(value_at(5)) +
+                                              " (given twice)");
 }
 
 TEST_CASE("index: a full disk mid-save leaves the old file intact, and no temporary file",

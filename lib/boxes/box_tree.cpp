@@ -167,10 +167,17 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
   if (n >= (std::size_t{1} << 30)) fail("too many boxes: " + std::to_string(n));
   if (p.max_depth > max_box_tree_depth)
     fail("depth cap " + std::to_string(p.max_depth) + " above " + std::to_string(max_box_tree_depth));
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::string problem = box_problem(p.boxes[i]);
-    if (!problem.empty()) fail("box " + std::to_string(i + 1) + ": " + problem);
-  }
+  // The messages are made only for a box or node that fails (a million strings would take most of
+  // a mapped load's time).
+  auto sound = [](const Box3f& b) {
+    constexpr float largest = std::numeric_limits<float>::max();  // NaN and infinity fail the test
+    bool ok = true;                                               // no branch a coordinate
+    for (int a = 0; a < 3; ++a)
+      ok &= (std::abs(b.lo[a]) <= largest) & (std::abs(b.hi[a]) <= largest) & (b.lo[a] <= b.hi[a]);
+    return ok;
+  };
+  for (std::size_t i = 0; i < n; ++i)
+    if (!sound(p.boxes[i])) fail("box " + std::to_string(i + 1) + ": " + box_problem(p.boxes[i]));
   const std::size_t refs = p.references.size();
   if (p.nodes.size() >= (std::size_t{1} << 28) || refs >= (std::size_t{1} << 30))
     fail("more than 2^28 nodes or 2^30 references");
@@ -189,31 +196,37 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
   while (!stack.empty()) {
     const Pending at = stack.back();
     stack.pop_back();
-    const std::string where = "node " + std::to_string(at.parent) + ": ";
+    auto where = [&at] { return "node " + std::to_string(at.parent) + ": "; };
     if (at.id != next || next >= p.nodes.size())
-      fail(where + "child " + std::to_string(at.id) + ", expected " + std::to_string(next) + " (of " +
+      fail(where() + "child " + std::to_string(at.id) + ", expected " + std::to_string(next) + " (of " +
            std::to_string(p.nodes.size()) + " nodes)");
-    if (at.depth > max_box_tree_depth) fail(where + "deeper than " + std::to_string(max_box_tree_depth));
+    if (at.depth > max_box_tree_depth) fail(where() + "deeper than " + std::to_string(max_box_tree_depth));
     const BoxNode& node = p.nodes[next++];
     if (node.is_leaf()) {
       const std::size_t count = node.count(), padded = (count + 3) / 4 * 4;
-      const std::string leaf = "leaf " + std::to_string(at.id) + ": ";
-      if (node.first() != next_ref || padded > refs - next_ref) fail(leaf + "references out of place");
+      auto leaf = [&at] { return "leaf " + std::to_string(at.id) + ": "; };
+      if (node.first() != next_ref || padded > refs - next_ref) fail(leaf() + "references out of place");
       const std::uint32_t* ids = p.references.data() + next_ref;
       for (std::size_t i = 0; i < padded; ++i) {
+        // The boxes named by the references lie anywhere: fetch the box of a reference 16 ahead.
+        if (next_ref + i + 16 < refs)
+          __builtin_prefetch(p.boxes.data() + std::min<std::size_t>(ids[i + 16], n - 1));
         const std::uint32_t id = ids[i];
-        if (id >= n) fail(leaf + "reference names box " + std::to_string(id) + " of " + std::to_string(n));
+        if (id >= n) fail(leaf() + "reference names box " + std::to_string(id) + " of " + std::to_string(n));
         if (i < count ? i > 0 && id <= ids[i - 1] : id != ids[count - 1])
-          fail(leaf + (i < count ? "references not ascending" : "padding does not repeat the last reference"));
+          fail(leaf() +
+               (i < count ? "references not ascending" : "padding does not repeat the last reference"));
         referenced[id] = true;
         // The traversal tests a leaf's boxes from their copies in the blocks: each copy must be its box.
         const LeafBlock& block = p.blocks[(next_ref + i) / 4];
         const Box3f& b = p.boxes[id];
         const std::size_t lane = i % 4;
+        bool same = true;
         for (int a = 0; a < 3; ++a)
-          if (!(block.plane[a][lane] == b.lo[a] && block.plane[3 + a][lane] == b.hi[a]))
-            fail(leaf + "leaf block " + std::to_string((next_ref + i) / 4) + " lane " + std::to_string(lane) +
-                 " differs from box " + std::to_string(id));
+          same &= (block.plane[a][lane] == b.lo[a]) & (block.plane[3 + a][lane] == b.hi[a]);
+        if (!same)
+          fail(leaf() + "leaf block " + std::to_string((next_ref + i) / 4) + " lane " + std::to_string(lane) +
+               " differs from box " + std::to_string(id));
       }
       next_ref += padded;
       depth = std::max(depth, at.depth);

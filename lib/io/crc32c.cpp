@@ -126,6 +126,10 @@ std::uint32_t crc32c(const void* data, std::size_t size) {
   return ~update_software(0xFFFFFFFFu, p, size);
 }
 
+std::uint32_t crc32c_combine(std::uint32_t crc_a, std::uint32_t crc_b, std::size_t length_b) {
+  return multiply(crc_a, zeros_operator(length_b)) ^ crc_b;
+}
+
 std::uint32_t crc32c_portable(const void* data, std::size_t size) {
   return ~update_software(0xFFFFFFFFu, static_cast<const unsigned char*>(data), size);
 }

@@ -18,11 +18,11 @@
 #include <cstddef>
 #include <cstdint>
 #include <exception>
-#include <future>
 #include <memory>
 #include <optional>
 #include <string>
 #include <system_error>
+#include <thread>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -139,17 +139,17 @@ std::size_t level_for(std::size_t n, std::size_t base_capacity);
 }  // namespace detail
 
 /// Runs load(file) (one of the loaders below that take an IndexFile) on a file opened with
-/// Checksums::deferred, while another thread checks the file's checksums: the structural checks
-/// are safe on any bytes, so the two passes over the file take the time of one. A checksum error
+/// Checksums::deferred, while a second thread checks the file's checksums; when load is done, the
+/// calling thread takes its share of what is left of them (IndexFile::ChecksumPass), so that the
+/// two threads share the whole work. The structural checks are safe on any bytes. A checksum error
 /// wins over load's (it explains any other). The loaders that take a path work this way.
 template <class Load>
 auto load_with_checksums(const std::shared_ptr<const IndexFile>& file, Load load) {
-  std::future<void> checksums;
+  IndexFile::ChecksumPass checksums(*file);
+  std::thread helper;
   try {
-    checksums = std::async(std::launch::async, [file] { file->verify_checksums(); });
-  } catch (const std::system_error&) {  // no thread to be had
-    file->verify_checksums();
-    return load(file);
+    helper = std::thread([&checksums] { checksums.run(); });
+  } catch (const std::system_error&) {  // no thread to be had: the calling thread does it all
   }
   std::optional<decltype(load(file))> result;
   std::exception_ptr load_error;
@@ -158,7 +158,9 @@ auto load_with_checksums(const std::shared_ptr<const IndexFile>& file, Load load
   } catch (...) {
     load_error = std::current_exception();
   }
-  checksums.get();
+  checksums.run();
+  if (helper.joinable()) helper.join();
+  checksums.finish();
   if (load_error) std::rethrow_exception(load_error);
   return std::move(*result);
 }

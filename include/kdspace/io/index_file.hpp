@@ -37,8 +37,8 @@
 // is zero (no byte of the file goes unchecked), and every section's checksum. The loaders of each
 // kind then check the sections they need and the structure they hold (tree links in range, leaf
 // ranges in range, no cycles, and for point trees every point inside the splits above it) before a
-// query can run; they check the sections' checksums on a second thread meanwhile (the structural
-// checks are safe on any bytes) and return an index only when both pass. Every problem throws
+// query can run, while a second thread checks the sections' checksums in chunks that the first shares
+// once done (structural checks are safe on any bytes); both pass, or no index. Every problem throws
 // kdspace::Error naming the file and what is wrong; nothing is allocated for what a header claims
 // (every length is checked against the file's size first).
 //
@@ -51,6 +51,7 @@
 // and checks them. Nothing else in this file changes.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -177,6 +178,26 @@ class IndexFile {
 
   /// Checks every section's checksum (for a file opened with Checksums::deferred); thread-safe.
   void verify_checksums() const;
+
+  /// The sections' checksums as chunks of a fixed size that several threads share: each calls run(),
+  /// which takes chunks until none is left; once all have returned, finish() combines each section's
+  /// chunk checksums (crc32c_combine) and throws Error naming the first damaged section.
+  class ChecksumPass {
+   public:
+    explicit ChecksumPass(const IndexFile& file);
+    void run();
+    void finish() const;
+
+   private:
+    struct Chunk {
+      std::size_t section;
+      std::uint64_t offset, length;
+    };
+    const IndexFile& file_;
+    std::vector<Chunk> chunks_;
+    std::vector<std::uint32_t> crcs_;
+    std::atomic<std::size_t> next_{0};
+  };
 
   /// Throws Error("PATH: what").
   [[noreturn]] void fail(const std::string& what) const;
