@@ -171,10 +171,11 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
   // a mapped load's time).
   auto sound = [](const Box3f& b) {
     constexpr float largest = std::numeric_limits<float>::max();  // NaN and infinity fail the test
-    bool ok = true;                                               // no branch a coordinate
+    unsigned ok = 1;                                              // no branch a coordinate
     for (int a = 0; a < 3; ++a)
-      ok &= (std::abs(b.lo[a]) <= largest) & (std::abs(b.hi[a]) <= largest) & (b.lo[a] <= b.hi[a]);
-    return ok;
+      ok &= static_cast<unsigned>(std::abs(b.lo[a]) <= largest) &
+            static_cast<unsigned>(std::abs(b.hi[a]) <= largest) & static_cast<unsigned>(b.lo[a] <= b.hi[a]);
+    return ok != 0;
   };
   for (std::size_t i = 0; i < n; ++i)
     if (!sound(p.boxes[i])) fail("box " + std::to_string(i + 1) + ": " + box_problem(p.boxes[i]));
@@ -221,10 +222,11 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
         const LeafBlock& block = p.blocks[(next_ref + i) / 4];
         const Box3f& b = p.boxes[id];
         const std::size_t lane = i % 4;
-        bool same = true;
+        unsigned same = 1;
         for (int a = 0; a < 3; ++a)
-          same &= (block.plane[a][lane] == b.lo[a]) & (block.plane[3 + a][lane] == b.hi[a]);
-        if (!same)
+          same &= static_cast<unsigned>(block.plane[a][lane] == b.lo[a]) &
+                  static_cast<unsigned>(block.plane[3 + a][lane] == b.hi[a]);
+        if (same == 0)
           fail(leaf() + "leaf block " + std::to_string((next_ref + i) / 4) + " lane " + std::to_string(lane) +
                " differs from box " + std::to_string(id));
       }
