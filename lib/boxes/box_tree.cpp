@@ -210,7 +210,7 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
       const std::uint32_t* ids = p.references.data() + next_ref;
       for (std::size_t i = 0; i < padded; ++i) {
         // The boxes named by the references lie anywhere: fetch the box of a reference 16 ahead.
-        if (next_ref + i + 16 < refs)
+        if (next_ref + i + 16 < refs && n > 0)
           __builtin_prefetch(p.boxes.data() + std::min<std::size_t>(ids[i + 16], n - 1));
         const std::uint32_t id = ids[i];
         if (id >= n) fail(leaf() + "reference names box " + std::to_string(id) + " of " + std::to_string(n));
