@@ -170,12 +170,9 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
   // The messages are made only for a box or node that fails (a million strings would take most of
   // a mapped load's time).
   auto sound = [](const Box3f& b) {
-    constexpr float largest = std::numeric_limits<float>::max();  // NaN and infinity fail the test
-    unsigned ok = 1;                                              // no branch a coordinate
     for (int a = 0; a < 3; ++a)
-      ok &= static_cast<unsigned>(std::abs(b.lo[a]) <= largest) &
-            static_cast<unsigned>(std::abs(b.hi[a]) <= largest) & static_cast<unsigned>(b.lo[a] <= b.hi[a]);
-    return ok != 0;
+      if (!(std::isfinite(b.lo[a]) && std::isfinite(b.hi[a]) && b.lo[a] <= b.hi[a])) return false;
+    return true;
   };
   for (std::size_t i = 0; i < n; ++i)
     if (!sound(p.boxes[i])) fail("box " + std::to_string(i + 1) + ": " + box_problem(p.boxes[i]));
@@ -222,13 +219,10 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
         const LeafBlock& block = p.blocks[(next_ref + i) / 4];
         const Box3f& b = p.boxes[id];
         const std::size_t lane = i % 4;
-        unsigned same = 1;
         for (int a = 0; a < 3; ++a)
-          same &= static_cast<unsigned>(block.plane[a][lane] == b.lo[a]) &
-                  static_cast<unsigned>(block.plane[3 + a][lane] == b.hi[a]);
-        if (same == 0)
-          fail(leaf() + "leaf block " + std::to_string((next_ref + i) / 4) + " lane " + std::to_string(lane) +
-               " differs from box " + std::to_string(id));
+          if (!(block.plane[a][lane] == b.lo[a] && block.plane[3 + a][lane] == b.hi[a]))
+            fail(leaf() + "leaf block " + std::to_string((next_ref + i) / 4) + " lane " +
+                 std::to_string(lane) + " differs from box " + std::to_string(id));
       }
       next_ref += padded;
       depth = std::max(depth, at.depth);
