@@ -95,7 +95,7 @@ struct Joins {
   }
 
   static NeighborLists<T> radius(const Tree& queries, const Tree& reference, T r, const JoinParams& params, JoinStats* stats) {
-    return neighbor_lists(found_within(queries, &reference, r, params, stats), queries.size());
+    return neighbor_lists(found_within(queries, &reference, r, params, stats, NearestFirst{}), queries.size());
   }
 
   // ---- one query against a reference prepared once (PeriodicTree) --------------------------------
@@ -115,7 +115,8 @@ struct Joins {
     const std::uint32_t index = 0;
     const Bounded query(q, reference.dim(), &index);
     const NeighborLists<T> found = neighbor_lists(with_space(period, [&](const auto& space) {
-      return range_join_trees<DistanceSink<T>, FoundPair<T>>(query, reference, limit, false, space, 1, nullptr);
+      return range_join_trees<DistanceSink<T>, FoundPair<T>>(query, reference, limit, false, space, 1, nullptr,
+                                                             NearestFirst{});
     }), 1);
     return std::vector<Neighbor<T>>(found.neighbors.begin(), found.neighbors.end());
   }
@@ -139,16 +140,15 @@ struct Joins {
     const BoundedPair trees(a, b, range_leaf_points);
     const std::vector<T> period = trees.periods(params);
     std::vector<IndexPair> found = with_space(period, [&](const auto& space) {
-      return range_join_trees<PairSink, IndexPair>(trees.first, trees.second(), limit, self, space, params.threads, stats);
+      return range_join_trees<PairSink, IndexPair>(trees.first, trees.second(), limit, self, space, params.threads, stats,
+                                                   BySecondIndex{});
     });
-    sort_by_indices(found, a.size(), self ? a.size() : b->size());
     return found;
   }
 
   static std::vector<PairDistance<T>> distances(const Tree& a, const Tree* b, T r, const JoinParams& params,
                                                 JoinStats* stats) {
-    std::vector<FoundPair<T>> found = found_within(a, b, r, params, stats);
-    sort_by_indices(found, a.size(), b ? b->size() : a.size());
+    const std::vector<FoundPair<T>> found = found_within(a, b, r, params, stats, BySecondIndex{});
     std::vector<PairDistance<T>> out;
     out.reserve(found.size());
     for (const auto& f : found) out.push_back(PairDistance<T>{f.a, f.b, Metric::to_distance(f.dist)});
@@ -205,11 +205,8 @@ struct Joins {
     return counts;
   }
 
-  // Lists of neighbours by query (rows in original order), each in (distance, index) order.
-  static NeighborLists<T> neighbor_lists(std::vector<FoundPair<T>> found, std::size_t queries) {
-    sort_by_first_index(found, queries, [](const FoundPair<T>& x, const FoundPair<T>& y) {
-      return x.dist < y.dist || (x.dist == y.dist && x.b < y.b);
-    });
+  // Lists of neighbours by query (rows in original order) from pairs in (a, distance, index) order.
+  static NeighborLists<T> neighbor_lists(const std::vector<FoundPair<T>>& found, std::size_t queries) {
     NeighborLists<T> out;
     out.offsets.assign(queries + 1, 0);
     for (const auto& f : found) ++out.offsets[std::size_t{f.a} + 1];
@@ -219,8 +216,9 @@ struct Joins {
     return out;
   }
 
+  template <class Less>
   static std::vector<FoundPair<T>> found_within(const Tree& a, const Tree* b, T r, const JoinParams& params,
-                                                JoinStats* stats) {
+                                                JoinStats* stats, Less&& less_within_a) {
     const T limit = internal_radius(r);
     const bool self = b == nullptr;
     check_pair(a, self ? a : *b);
@@ -228,7 +226,7 @@ struct Joins {
     const std::vector<T> period = trees.periods(params);
     return with_space(period, [&](const auto& space) {
       return range_join_trees<DistanceSink<T>, FoundPair<T>>(trees.first, trees.second(), limit, self, space,
-                                                             params.threads, stats);
+                                                             params.threads, stats, less_within_a);
     });
   }
 

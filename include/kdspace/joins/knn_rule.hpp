@@ -26,6 +26,12 @@ namespace kdspace::detail {
 /// The k best candidates of each of n query points: row i is candidates[i * k, i * k + k); kth(i) is
 /// the distance of its k-th once it holds k, +inf before.
 ///
+/// Every row starts full of placeholders (+inf, largest index), which any real candidate comes
+/// before (a real index is smaller; +inf distances included): so an offer is one comparison with the
+/// row's last (or top) entry and never asks how full the row is, and kth(i) is that entry's
+/// distance. A join offers k or more real points to every row (k is at most the points available),
+/// so no placeholder is left at the end.
+///
 /// For k up to sorted_rows_up_to a row is kept in result order ((distance, index) ascending): a join
 /// offers each point a few dozen candidates, most refused by one comparison with kth(i), and an
 /// accepted one moves the few entries after its place (for k = 10 about a quarter of the instructions
@@ -37,57 +43,55 @@ class KnnTable {
   static constexpr std::size_t sorted_rows_up_to = 32;
 
   KnnTable(std::size_t n, std::size_t k)
-      : k_(k), sorted_rows_(k <= sorted_rows_up_to), candidates_(n * k), sizes_(n, 0),
+      : k_(k),
+        sorted_rows_(k <= sorted_rows_up_to),
+        candidates_(n * k, Candidate<T>{std::numeric_limits<T>::infinity(), std::numeric_limits<std::uint32_t>::max()}),
         kth_(n, std::numeric_limits<T>::infinity()) {}
 
   T kth(std::size_t i) const { return kth_[i]; }
   /// kth(i) onwards from row `first`: the limits of a block of query points (points_near_box).
   const T* kths(std::size_t first) const { return kth_.data() + first; }
 
-  /// Offers a candidate to row i: kept when the row holds fewer than k or it comes before the k-th
-  /// in (distance, index) order (the decision of KnnResults::offer); false when refused.
+  /// Offers a candidate to row i: kept when it comes before the row's k-th in (distance, index)
+  /// order (the decision of KnnResults::offer); false when refused.
   bool offer(std::size_t i, T dist, std::uint32_t index) {
     Candidate<T>* row = candidates_.data() + i * k_;
-    std::uint32_t& size = sizes_[i];
     const Candidate<T> c{dist, index};
-    if (sorted_rows_) {
-      std::size_t place;
-      if (size < k_) {
-        place = size++;
-      } else {
-        if (!comes_before(c, row[k_ - 1])) return false;
-        place = k_ - 1;
-      }
-      for (; place > 0 && comes_before(c, row[place - 1]); --place) row[place] = row[place - 1];
-      row[place] = c;
-      if (size == k_) kth_[i] = row[k_ - 1].dist;
-      return true;
-    }
-    if (size < k_) {
-      row[size++] = c;
-      std::push_heap(row, row + size, comes_before);
-    } else {
-      if (!comes_before(c, row[0])) return false;
-      std::pop_heap(row, row + k_, comes_before);
-      row[k_ - 1] = c;
-      std::push_heap(row, row + k_, comes_before);
-    }
-    if (size == k_) kth_[i] = row[0].dist;
+    if (!sorted_rows_) return offer_to_heap(i, row, c);
+    if (!comes_before(c, row[k_ - 1])) return false;
+    // Past the entries of larger distance, then past those of equal distance and larger index.
+    std::size_t place = k_ - 1;
+    for (; place > 0 && dist < row[place - 1].dist; --place) row[place] = row[place - 1];
+    for (; place > 0 && dist == row[place - 1].dist && index < row[place - 1].index; --place) row[place] = row[place - 1];
+    row[place] = c;
+    kth_[i] = row[k_ - 1].dist;
     return true;
   }
 
   /// Row i in result order (once all offers are made).
   const Candidate<T>* sorted_row(std::size_t i) {
     Candidate<T>* row = candidates_.data() + i * k_;
-    if (!sorted_rows_) std::sort_heap(row, row + sizes_[i], comes_before);
+    if (!sorted_rows_) std::sort_heap(row, row + k_, comes_before);
     return row;
   }
 
  private:
+  // Out of line, so that the sorted rows' offer stays small enough to be inlined where it is made.
+#if defined(__GNUC__)
+  __attribute__((noinline))
+#endif
+  bool offer_to_heap(std::size_t i, Candidate<T>* row, const Candidate<T>& c) {
+    if (!comes_before(c, row[0])) return false;
+    std::pop_heap(row, row + k_, comes_before);
+    row[k_ - 1] = c;
+    std::push_heap(row, row + k_, comes_before);
+    kth_[i] = row[0].dist;
+    return true;
+  }
+
   std::size_t k_;
   bool sorted_rows_;
   std::vector<Candidate<T>> candidates_;
-  std::vector<std::uint32_t> sizes_;
   std::vector<T> kth_;
 };
 

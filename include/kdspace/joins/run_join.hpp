@@ -65,11 +65,77 @@ NeighborLists<T> knn_join_trees(const BoundedTree<T, Dim>& queries, const Bounde
   return out;
 }
 
+/// The orders of the pairs of one first point: by the second point (the `.pairs` order), or by
+/// (distance, index) (neighbour lists).
+struct BySecondIndex {
+  template <class Record>
+  bool operator()(const Record& x, const Record& y) const {
+    return x.b < y.b;
+  }
+};
+struct NearestFirst {
+  template <class Found>
+  bool operator()(const Found& x, const Found& y) const {
+    return x.dist < y.dist || (x.dist == y.dist && x.b < y.b);
+  }
+};
+
+/// The records of all tasks with fields a < n_a, ordered by a, then by less_within_a.
+///
+/// Two counting passes, each of which touches memory in order: the first moves the records into
+/// buckets of consecutive a (up to 1024 of them, straight from the tasks' vectors, each freed once
+/// moved), the second orders each bucket by a within a table of counts that stays in the cache, into
+/// its place in the result; then each run of equal a, as short as one point's pairs, is sorted. (One
+/// counting pass over all of a scatters every record to a random place of the result, and reads
+/// and writes a table of n_a counts at random.)
+template <class Record, class Less>
+std::vector<Record> sort_by_first_index(std::vector<std::vector<Record>>& per_task, std::size_t n_a,
+                                        Less&& less_within_a) {
+  constexpr std::size_t max_buckets = 1024;
+  unsigned shift = 0;
+  while ((n_a >> shift) >= max_buckets) ++shift;
+  const std::size_t buckets = (n_a >> shift) + 1, width = std::size_t{1} << shift;
+  std::vector<std::size_t> bucket_next(buckets + 1, 0);
+  for (const auto& records : per_task)
+    for (const Record& r : records) ++bucket_next[(std::size_t{r.a} >> shift) + 1];
+  for (std::size_t k = 0; k < buckets; ++k) bucket_next[k + 1] += bucket_next[k];
+  const std::size_t total = bucket_next[buckets];
+  std::vector<Record> by_bucket(total);
+  for (auto& records : per_task) {
+    for (const Record& r : records) by_bucket[bucket_next[std::size_t{r.a} >> shift]++] = r;
+    std::vector<Record>().swap(records);
+  }
+  // Now bucket_next[k] is where bucket k ends.
+  std::vector<Record> sorted(total);
+  std::vector<std::size_t> next(width + 1);
+  std::size_t bucket_begin = 0;
+  for (std::size_t k = 0; k < buckets; ++k) {
+    const std::size_t bucket_end = bucket_next[k], first_a = k << shift;
+    std::fill(next.begin(), next.end(), std::size_t{0});
+    for (std::size_t i = bucket_begin; i < bucket_end; ++i) ++next[by_bucket[i].a - first_a + 1];
+    next[0] = bucket_begin;
+    for (std::size_t a = 0; a < width; ++a) next[a + 1] += next[a];
+    for (std::size_t i = bucket_begin; i < bucket_end; ++i) sorted[next[by_bucket[i].a - first_a]++] = by_bucket[i];
+    // Now next[a] is where the run of first_a + a ends (and that of the next a begins).
+    std::size_t begin = bucket_begin;
+    for (std::size_t a = 0; a < width; ++a) {
+      const std::size_t end = next[a];
+      if (end - begin > 1)
+        std::sort(sorted.begin() + static_cast<std::ptrdiff_t>(begin), sorted.begin() + static_cast<std::ptrdiff_t>(end),
+                  less_within_a);
+      begin = end;
+    }
+    bucket_begin = bucket_end;
+  }
+  return sorted;
+}
+
 /// Every pair within `limit` (internal units), through a sink of type Sink (PairSink or
-/// DistanceSink); the pairs of all tasks, in task order.
-template <class Sink, class Found, class T, int Dim, class Space>
+/// DistanceSink), ordered by a, then by less_within_a.
+template <class Sink, class Found, class T, int Dim, class Space, class Less>
 std::vector<Found> range_join_trees(const BoundedTree<T, Dim>& queries, const BoundedTree<T, Dim>& reference, T limit,
-                                    bool self, const Space& space, unsigned threads, JoinStats* stats) {
+                                    bool self, const Space& space, unsigned threads, JoinStats* stats,
+                                    Less&& less_within_a) {
   std::vector<std::vector<Found>> per_task(task_roots(queries, task_points(queries.size())).size());
   using Rule = RangeRule<T, Dim, Space, Sink>;
   for_each_task(queries, threads, stats, [&](std::size_t task, std::uint32_t root, JoinStats& task_stats) {
@@ -77,49 +143,7 @@ std::vector<Found> range_join_trees(const BoundedTree<T, Dim>& queries, const Bo
     Rule rule(queries, reference, space, self, limit, sink, task_stats);
     DualTraversal<Rule>(rule, task_stats).run(root, 0, {});
   });
-  std::size_t total = 0;
-  for (const auto& found : per_task) total += found.size();
-  std::vector<Found> all;
-  all.reserve(total);
-  for (auto& found : per_task) {
-    all.insert(all.end(), found.begin(), found.end());
-    std::vector<Found>().swap(found);
-  }
-  return all;
-}
-
-/// Moves the records of `from` into `to` ordered by key(record) < keys, stably (a counting sort).
-template <class Record, class Key>
-void counting_sort(const std::vector<Record>& from, std::vector<Record>& to, std::size_t keys, Key&& key) {
-  std::vector<std::size_t> next(keys + 1, 0);
-  for (const Record& r : from) ++next[std::size_t{key(r)} + 1];
-  for (std::size_t k = 0; k < keys; ++k) next[k + 1] += next[k];
-  to.resize(from.size());
-  for (const Record& r : from) to[next[key(r)]++] = r;
-}
-
-/// Sorts records with fields a < n_a and b < n_b by (a, b): by b, then stably by a (least
-/// significant first), in time linear in their number and without comparisons.
-template <class Record>
-void sort_by_indices(std::vector<Record>& records, std::size_t n_a, std::size_t n_b) {
-  std::vector<Record> by_b;
-  counting_sort(records, by_b, n_b, [](const Record& r) { return r.b; });
-  counting_sort(by_b, records, n_a, [](const Record& r) { return r.a; });
-}
-
-/// Sorts records with fields a < n_a and b by a, then by less_within_a (each run of equal a is as
-/// short as a point's neighbour list).
-template <class Record, class Less>
-void sort_by_first_index(std::vector<Record>& records, std::size_t n_a, Less&& less_within_a) {
-  std::vector<Record> sorted;
-  counting_sort(records, sorted, n_a, [](const Record& r) { return r.a; });
-  auto run = sorted.begin();
-  while (run != sorted.end()) {
-    const auto end = std::find_if(run, sorted.end(), [&](const Record& r) { return r.a != run->a; });
-    std::sort(run, end, less_within_a);
-    run = end;
-  }
-  records.swap(sorted);
+  return sort_by_first_index(per_task, queries.size(), less_within_a);
 }
 
 /// Bin counts of every pair (Count = std::uint64_t) or of their weights (Count = double) over the
