@@ -82,12 +82,13 @@ struct NearestFirst {
 
 /// The records of all tasks with fields a < n_a, ordered by a, then by less_within_a.
 ///
-/// Two counting passes, each of which touches memory in order: the first moves the records into
-/// buckets of consecutive a (up to 1024 of them, straight from the tasks' vectors, each freed once
-/// moved), the second orders each bucket by a within a table of counts that stays in the cache, into
-/// its place in the result; then each run of equal a, as short as one point's pairs, is sorted. (One
-/// counting pass over all of a scatters every record to a random place of the result, and reads
-/// and writes a table of n_a counts at random.)
+/// Two counting passes that work within the cache: the first moves the records into up to 1024
+/// buckets of consecutive a (1024 write streams, straight from the tasks' vectors, each freed once
+/// moved), the second orders each bucket by a, with a table of counts as wide as a bucket, into its
+/// place in the result; then each run of equal a, as short as one point's pairs, is sorted. (One
+/// counting pass over all of a writes every record to a random place of the result and updates a
+/// table of n_a counts at random: sort time 12% lower with buckets, perf samples, 1e6 uniform 3-D
+/// points, 4.8e6 pairs.)
 template <class Record, class Less>
 std::vector<Record> sort_by_first_index(std::vector<std::vector<Record>>& per_task, std::size_t n_a,
                                         Less&& less_within_a) {
