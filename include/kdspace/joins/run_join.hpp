@@ -87,8 +87,8 @@ struct NearestFirst {
 /// moved), the second orders each bucket by a, with a table of counts as wide as a bucket, into its
 /// place in the result; then each run of equal a, as short as one point's pairs, is sorted. (One
 /// counting pass over all of a writes every record to a random place of the result and updates a
-/// table of n_a counts at random: sort time 12% lower with buckets, perf samples, 1e6 uniform 3-D
-/// points, 4.8e6 pairs.)
+/// table of n_a counts at random. Perf samples in the ordering, 1e6 uniform 3-D points, 4.8e6
+/// pairs: counting sorts by b then by a 1122, by a alone 875-953, by buckets 795-813.)
 template <class Record, class Less>
 std::vector<Record> sort_by_first_index(std::vector<std::vector<Record>>& per_task, std::size_t n_a,
                                         Less&& less_within_a) {
