@@ -215,6 +215,33 @@ TEST_CASE("graph: a seed gives one graph; byte rows give the graph of their valu
   CHECK(a.graph().links != c.graph().links);
 }
 
+TEST_CASE("graph: the build's pool follows the intrinsic dimension of the data", "[points][graph]") {
+  // graph_build_ef = 0 (the default) gives twice the estimated intrinsic dimension, within 16..24:
+  // 16 for points on a plane, whatever the dimension of the space they are in, and 24 for points
+  // spread in all 64 dimensions.
+  auto same_graph = [](const std::vector<float>& pts, std::size_t n, std::size_t dim, std::size_t pool) {
+    const PointForest<float> automatic(pts.data(), n, dim, with_graph());
+    ForestParams explicit_pool = with_graph();
+    explicit_pool.graph_build_ef = pool;
+    const PointForest<float> fixed(pts.data(), n, dim, explicit_pool);
+    return automatic.graph().links == fixed.graph().links;
+  };
+  const std::size_t n = 3000, dim = 16;
+  std::mt19937 rng(681);
+  std::uniform_real_distribution<float> unit(0.f, 1.f);
+  std::vector<float> directions(2 * dim), plane(n * dim);
+  for (float& d : directions) d = unit(rng) - 0.5f;
+  for (std::size_t i = 0; i < n; ++i) {
+    const float u = unit(rng), v = unit(rng);
+    for (std::size_t a = 0; a < dim; ++a) plane[i * dim + a] = u * directions[a] + v * directions[dim + a];
+  }
+  CHECK(same_graph(plane, n, dim, 16));
+  CHECK_FALSE(same_graph(plane, n, dim, 24));
+  const auto spread = make_points<float>(Shape::uniform, n, 64, 682);
+  CHECK(same_graph(spread, n, 64, 24));
+  CHECK_FALSE(same_graph(spread, n, 64, 16));
+}
+
 TEST_CASE("graph: degenerate data: identical points, duplicates, one or two points, k = n", "[points][graph]") {
   for (Shape shape : {Shape::identical, Shape::duplicates, Shape::flat, Shape::grid}) {
     const std::size_t n = 700, dim = 12;
@@ -296,7 +323,6 @@ TEST_CASE("graph: bad parameters get clear errors", "[points][graph][errors]") {
   };
   CHECK_THROWS_WITH(build([](ForestParams& p) { p.graph_degree = 1; }), Catch::Contains("graph_degree must be in 2..1024"));
   CHECK_THROWS_WITH(build([](ForestParams& p) { p.graph_degree = 1025; }), Catch::Contains("graph_degree"));
-  CHECK_THROWS_WITH(build([](ForestParams& p) { p.graph_build_ef = 0; }), Catch::Contains("graph_build_ef"));
   for (double alpha : {0.9, 17.0, std::numeric_limits<double>::quiet_NaN()})
     CHECK_THROWS_WITH(build([alpha](ForestParams& p) { p.graph_alpha = alpha; }), Catch::Contains("graph_alpha"));
   ForestParams off;

@@ -11,7 +11,7 @@ namespace kdspace::detail {
 
 struct GraphBuildParams {
   std::size_t degree = 32;    ///< R: the most neighbours a point keeps
-  std::size_t build_ef = 24;  ///< pool of the search that finds each point's neighbours
+  std::size_t build_ef = 0;  ///< pool of the search that finds each point's neighbours; 0: from the data
   double alpha = 1.2;         ///< slack of the pruning rule (1 = the relative neighbourhood rule)
   unsigned threads = 1;
 };

@@ -163,7 +163,6 @@ void check_params(const ForestParams& p) {
   if (p.pca && p.pca_sample < 2) throw Error("forest: pca_sample must be at least 2");
   if (p.graph_degree < 2 || p.graph_degree > 1024)
     throw Error("forest: graph_degree must be in 2..1024, got " + std::to_string(p.graph_degree));
-  if (p.graph_build_ef == 0) throw Error("forest: graph_build_ef must be at least 1");
   if (!(p.graph_alpha >= 1 && p.graph_alpha <= 16))
     throw Error("forest: graph_alpha must be in [1, 16], got " + std::to_string(p.graph_alpha));
 }

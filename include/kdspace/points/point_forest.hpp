@@ -89,9 +89,10 @@ struct ForestParams {
   /// Most neighbours a point keeps in the graph (2..1024). Its lists take 4 * graph_degree bytes a
   /// point.
   std::size_t graph_degree = 32;
-  /// Pool of the search that finds each point's neighbours while the graph is built (>= 1): larger
-  /// builds slower, and a graph that reaches a recall with fewer points scored.
-  std::size_t graph_build_ef = 24;
+  /// Pool of the search that finds each point's neighbours while the graph is built: larger builds
+  /// slower, and a graph that reaches a recall with fewer points scored. 0 (the default): from the
+  /// data, twice its intrinsic dimension as estimated from the trees' candidates, within 16..24.
+  std::size_t graph_build_ef = 0;
   /// Slack of the graph's pruning rule (>= 1): a point's neighbour c is dropped when one kept before
   /// it, w, has graph_alpha * |c - w| <= |p - c|. Larger keeps more edges.
   double graph_alpha = 1.2;
