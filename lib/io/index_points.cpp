@@ -122,7 +122,7 @@ template <class T>
 PointForest<T> load_point_forest(const std::shared_ptr<const IndexFile>& file, ForestSearchParams* search) {
   detail::expect_header(*file, {IndexKind::point_forest}, detail::scalar_of<T>(), MetricId::l2, 0);
   const std::vector<std::uint64_t> w = file->words(SectionType::params, 0, forest_params_version, forest_param_words);
-  if (w[0] == 0 || w[0] > 1024 || w[2] > 1 || w[5] > 1 || w[12] > w[0] || w[13] > 2 || w[14] > 1024 || w[15] == 0 ||
+  if (w[0] == 0 || w[0] > 1024 || w[2] > 1 || w[5] > 1 || w[12] > w[0] || w[13] > 2 || w[14] > 1024 ||
       w[15] > (std::uint64_t{1} << 30) || w[17] > 1024)
     file->fail("forest parameters out of range");
   typename PointForest<T>::Parts p;

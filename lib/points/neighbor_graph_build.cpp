@@ -156,9 +156,11 @@ class GraphBuilder {
       : rows_(rows), n_(n), dim_(dim), params_(params), workers_(resolve_threads(params.threads)),
         lists_(n, params.degree + params.degree / 4) {}
 
-  NeighborGraph build(const std::vector<const std::uint32_t*>& tree_orders) {
+  NeighborGraph build(const std::vector<const std::uint32_t*>& tree_orders, std::size_t* pool_used) {
     score_windows(tree_orders);
-    search_each_point(params_.build_ef > 0 ? params_.build_ef : pool_for_intrinsic_dimension());
+    const std::size_t pool = params_.build_ef > 0 ? params_.build_ef : pool_for_intrinsic_dimension();
+    if (pool_used) *pool_used = pool;
+    search_each_point(pool);
     NeighborGraph graph = prune_and_reverse();
     connect(graph);
     return graph;
@@ -455,20 +457,21 @@ class GraphBuilder {
 
 template <class T, class U>
 NeighborGraph build_neighbor_graph(const U* rows, std::size_t n, std::size_t dim,
-                                   const std::vector<const std::uint32_t*>& tree_orders, const GraphBuildParams& params) {
-  return GraphBuilder<T, U>(rows, n, dim, params).build(tree_orders);
+                                   const std::vector<const std::uint32_t*>& tree_orders, const GraphBuildParams& params,
+                                   std::size_t* pool_used) {
+  return GraphBuilder<T, U>(rows, n, dim, params).build(tree_orders, pool_used);
 }
 
 template NeighborGraph build_neighbor_graph<float, float>(const float*, std::size_t, std::size_t,
-                                                          const std::vector<const std::uint32_t*>&, const GraphBuildParams&);
+                                                          const std::vector<const std::uint32_t*>&, const GraphBuildParams&, std::size_t*);
 template NeighborGraph build_neighbor_graph<float, std::uint8_t>(const std::uint8_t*, std::size_t, std::size_t,
                                                                  const std::vector<const std::uint32_t*>&,
-                                                                 const GraphBuildParams&);
+                                                                 const GraphBuildParams&, std::size_t*);
 template NeighborGraph build_neighbor_graph<double, double>(const double*, std::size_t, std::size_t,
                                                             const std::vector<const std::uint32_t*>&,
-                                                            const GraphBuildParams&);
+                                                            const GraphBuildParams&, std::size_t*);
 template NeighborGraph build_neighbor_graph<double, std::uint8_t>(const std::uint8_t*, std::size_t, std::size_t,
                                                                   const std::vector<const std::uint32_t*>&,
-                                                                  const GraphBuildParams&);
+                                                                  const GraphBuildParams&, std::size_t*);
 
 }  // namespace kdspace::detail

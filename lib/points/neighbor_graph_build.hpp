@@ -18,9 +18,11 @@ struct GraphBuildParams {
 
 /// The graph over n rows (of U: T, or bytes) of `dim` values. `tree_orders` holds each tree's leaf
 /// order of the rows (nullptr: the rows themselves are in that tree's leaf order). The graph is the
-/// same for any number of threads.
+/// same for any number of threads. With `pool_used`, it receives the pool of the per-point searches
+/// (params.build_ef, or the one chosen from the data when that is 0).
 template <class T, class U>
 NeighborGraph build_neighbor_graph(const U* rows, std::size_t n, std::size_t dim,
-                                   const std::vector<const std::uint32_t*>& tree_orders, const GraphBuildParams& params);
+                                   const std::vector<const std::uint32_t*>& tree_orders, const GraphBuildParams& params,
+                                   std::size_t* pool_used = nullptr);
 
 }  // namespace kdspace::detail

@@ -25,8 +25,11 @@ void PointForest<T>::build_graph() {
   // The copy of the points follows the first tree's leaf order: that tree's order is the rows'.
   std::vector<const std::uint32_t*> orders{nullptr};
   for (std::size_t t = 1; t < trees_.size(); ++t) orders.push_back(trees_[t].order.data());
-  graph_ = compact() ? detail::build_neighbor_graph<T>(bytes_.data(), size(), dim_, orders, graph_params)
-                     : detail::build_neighbor_graph<T>(points_.data(), size(), dim_, orders, graph_params);
+  // params() (and a saved index) report the pool the build used, also when it was chosen from the data.
+  graph_ = compact() ? detail::build_neighbor_graph<T>(bytes_.data(), size(), dim_, orders, graph_params,
+                                                       &params_.graph_build_ef)
+                     : detail::build_neighbor_graph<T>(points_.data(), size(), dim_, orders, graph_params,
+                                                       &params_.graph_build_ef);
   graph_build_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
