@@ -4,7 +4,7 @@
 //     point is scored against the `window` points around it in the leaf order of each of the first
 //     `window_trees` trees (once, if it meets a point in several), and keeps the nearest it met: a
 //     list of degree + degree / 4 candidates.
-//  2. A search for each point's neighbours. The candidate lists, cut to `rough_degree`, already form
+//  2. A search for each point's neighbours. The candidate lists, cut short (rough_degree()), already form
 //     a graph; each point searches it for itself (graph_search.hpp, pool `build_ef`), starting from
 //     its own candidates (their distances are known), and keeps the nearest of what it found (the pool
 //     grows with the data's intrinsic dimension, estimated from the lists). This
@@ -46,13 +46,17 @@ namespace {
 /// the recall of the candidate lists less per distance computed than the search of step 2 does.
 constexpr std::size_t window = 32;
 constexpr std::size_t window_trees = 4;
-/// Step 2 searches the candidate lists cut to this many: each point read gives at most this many to
-/// score. Measured on 95k music frames (20-D) and 100k image descriptors: 16 instead of 32 cut the
-/// build's CPU time by a fifth for nearly the same graph (recall at ef 10 0.967 -> 0.965, and 0.904
-/// -> 0.889 at ef 16 on the images); 12 instead of 16 cut this step's CPU time by another 15%
-/// (one thread: music 0.39 -> 0.32 s, speech 0.42 -> 0.37 s) for recall at ef 24 0.9913 -> 0.9906 on
-/// music and 0.9963 -> 0.9962 on speech, and the images kept ef 176 for recall 0.99.
-constexpr std::size_t rough_degree = 12;
+/// Step 2 searches the candidate lists cut to at most this many: each point read gives at most this
+/// many to score. Measured on 95k music frames (20-D) and 100k image descriptors: 16 instead of 32
+/// cut the build's CPU time by a fifth for nearly the same graph (recall at ef 10 0.967 -> 0.965, and
+/// 0.904 -> 0.889 at ef 16 on the images). Smaller pools walk shorter lists (rough_degree()).
+constexpr std::size_t most_rough_degree = 16;
+/// Step 2's lists for a pool of `ef`: half the pool and 4, at most most_rough_degree. For the pool
+/// of 16 that the audio sets get, 12 instead of 16 cut step 2's CPU time by 15% (one thread: music
+/// 0.39 -> 0.32 s, speech 0.42 -> 0.37 s) for recall at ef 24 within 0.001; for the images' pool of
+/// 24 it cost recall at every ef (0.99 took ef 192 instead of 128 in kdspace-ann-bench), so a pool
+/// of 24 or more keeps 16.
+inline std::size_t rough_degree(std::size_t ef) { return std::min(ef / 2 + 4, most_rough_degree); }
 /// Work items a thread takes at a time.
 constexpr std::size_t chunk = 512;
 
@@ -236,10 +240,10 @@ class GraphBuilder {
     }
   }
 
-  // The lists cut to rough_degree, as a graph.
-  NeighborGraph lists_as_graph() const {
+  // The lists cut to `degree`, as a graph.
+  NeighborGraph lists_as_graph(std::size_t degree) const {
     NeighborGraph g;
-    std::uint32_t* const links = g.reset(n_, std::min(rough_degree, params_.degree));
+    std::uint32_t* const links = g.reset(n_, std::min(degree, params_.degree));
     for (std::size_t p = 0; p < n_; ++p)
       for (std::size_t i = 0; i < g.degree; ++i)
         links[p * g.degree + i] = i < lists_.size(p) ? lists_.list(p)[i].index : static_cast<std::uint32_t>(p);
@@ -278,7 +282,7 @@ class GraphBuilder {
 
   // Step 2: each point searches the graph of the lists for itself, keeping a pool of `ef`.
   void search_each_point(std::size_t ef) {
-    const NeighborGraph rough = lists_as_graph();
+    const NeighborGraph rough = lists_as_graph(rough_degree(ef));
     std::vector<GraphScratch<T>> scratch(workers_);
     std::vector<Work> work(workers_);
     parallel_for(n_, params_.threads, chunk, [&](std::size_t begin, std::size_t end, unsigned worker) {
