@@ -4,12 +4,12 @@
 //     point is scored against the `window` points around it in the leaf order of each of the first
 //     `window_trees` trees (once, if it meets a point in several), and keeps the nearest it met: a
 //     list of degree + degree / 4 candidates.
-//  2. A search for each point's neighbours. The candidate lists, cut short (rough_degree()), already form
-//     a graph; each point searches it for itself (graph_search.hpp, pool `build_ef`), starting from
-//     its own candidates (their distances are known), and keeps the nearest of what it found (the pool
-//     grows with the data's intrinsic dimension, estimated from the lists). This
-//     reaches the neighbours the windows missed, as the rounds of neighbour-of-neighbour exploration
-//     of NN-descent (Dong et al., "Efficient k-nearest neighbor graph construction for generic
+//  2. A search for each point's neighbours. The candidate lists, cut short (rough_degree()),
+//     already form a graph; each point searches it for itself (graph_search.hpp, pool `build_ef`,
+//     by default from the data's intrinsic dimension as the lists show it), starting from its own
+//     candidates (their distances are known), and keeps the nearest of what it found. This reaches
+//     the neighbours the windows missed, as the rounds of neighbour-of-neighbour exploration of
+//     NN-descent (Dong et al., "Efficient k-nearest neighbor graph construction for generic
 //     similarity measures", WWW 2011) and EFANNA (Fu & Cai, 2016) do, but in a best-first order that
 //     stops early. Both steps score with a kernel of their own, not internal_distance()'s
 //     bits: on float rows, one vector a block of 4 coordinates (BuildFloatScorer), on byte rows,
@@ -270,7 +270,8 @@ class GraphBuilder {
       const double farthest = static_cast<double>(list[k - 1].dist);
       if (!(list[0].dist > 0)) continue;  // duplicates: no scale to measure
       double logs = 0;  // sum of log(T_k / T_j), from squared distances
-      for (std::size_t j = 0; j + 1 < k; ++j) logs += 0.5 * std::log(farthest / static_cast<double>(list[j].dist));
+      for (std::size_t j = 0; j + 1 < k; ++j)
+        logs += 0.5 * std::log(farthest / static_cast<double>(list[j].dist));
       if (!(logs > 0)) continue;  // the 10 at one distance
       sum_of_estimates += static_cast<double>(k - 2) / logs;
       ++points;
@@ -461,13 +462,14 @@ class GraphBuilder {
 
 template <class T, class U>
 NeighborGraph build_neighbor_graph(const U* rows, std::size_t n, std::size_t dim,
-                                   const std::vector<const std::uint32_t*>& tree_orders, const GraphBuildParams& params,
-                                   std::size_t* pool_used) {
+                                   const std::vector<const std::uint32_t*>& tree_orders,
+                                   const GraphBuildParams& params, std::size_t* pool_used) {
   return GraphBuilder<T, U>(rows, n, dim, params).build(tree_orders, pool_used);
 }
 
 template NeighborGraph build_neighbor_graph<float, float>(const float*, std::size_t, std::size_t,
-                                                          const std::vector<const std::uint32_t*>&, const GraphBuildParams&, std::size_t*);
+                                                          const std::vector<const std::uint32_t*>&, const GraphBuildParams&,
+                                                          std::size_t*);
 template NeighborGraph build_neighbor_graph<float, std::uint8_t>(const std::uint8_t*, std::size_t, std::size_t,
                                                                  const std::vector<const std::uint32_t*>&,
                                                                  const GraphBuildParams&, std::size_t*);

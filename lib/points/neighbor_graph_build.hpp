@@ -11,7 +11,7 @@ namespace kdspace::detail {
 
 struct GraphBuildParams {
   std::size_t degree = 32;    ///< R: the most neighbours a point keeps
-  std::size_t build_ef = 0;  ///< pool of the search that finds each point's neighbours; 0: from the data
+  std::size_t build_ef = 0;   ///< pool of the search that finds each point's neighbours; 0: from the data
   double alpha = 1.2;         ///< slack of the pruning rule (1 = the relative neighbourhood rule)
   unsigned threads = 1;
 };
@@ -22,7 +22,7 @@ struct GraphBuildParams {
 /// (params.build_ef, or the one chosen from the data when that is 0).
 template <class T, class U>
 NeighborGraph build_neighbor_graph(const U* rows, std::size_t n, std::size_t dim,
-                                   const std::vector<const std::uint32_t*>& tree_orders, const GraphBuildParams& params,
-                                   std::size_t* pool_used = nullptr);
+                                   const std::vector<const std::uint32_t*>& tree_orders,
+                                   const GraphBuildParams& params, std::size_t* pool_used = nullptr);
 
 }  // namespace kdspace::detail
