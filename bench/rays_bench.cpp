@@ -775,10 +775,42 @@ Box3f scene_bounds(const std::vector<Box3f>& boxes) {
   return bounds;
 }
 
-/// kdspace's profile on one scene (1 thread): its tree and, per ray set, the work per ray and the
-/// time per ray cold (each ray once, one call a ray) and hot (each ray traced twice in a row: the
-/// second trace finds its nodes and boxes in cache, so cold - hot is the time spent waiting for
-/// memory).
+/// One row of the profile: the work per ray and the time per ray cold (each ray once, one call a
+/// ray) and hot (each ray traced twice in a row: the second trace finds its nodes and boxes in
+/// cache, so cold - hot is the time spent waiting for memory).
+void print_profile_row(const Scene& scene, const kdspace::BoxTree& tree, const RaySet& set,
+                       const std::string& name) {
+  if (set.rays.empty()) return;
+  kdspace::RayStats stats;
+  auto trace = [&](const Ray& r) {
+    if (set.any_hit)
+      tree.any_hit(r, set.t_min, set.t_max, &stats);
+    else
+      tree.closest_hit(r, set.t_min, set.t_max, &stats);
+  };
+  const Stopwatch once;
+  for (const Ray& r : set.rays) trace(r);
+  const double cold = once.seconds() * 1e9 / dbl(set.rays.size());
+  const kdspace::RayStats per_ray = stats;
+  const Stopwatch twice;
+  for (const Ray& r : set.rays) {
+    trace(r);
+    trace(r);
+  }
+  const double hot = twice.seconds() * 1e9 / dbl(set.rays.size()) - cold;
+  std::printf("| %s | %zu | %.2f | %.2f | %.1f | %.1f |\n", name.c_str(), set.rays.size(),
+              per_ray.nodes_visited_per_ray(), per_ray.boxes_tested_per_ray(), cold, hot);
+  std::printf(
+      "{\"bench\":\"rays-profile\",\"scene\":\"%s\",\"boxes\":%zu,\"rays\":\"%s\",\"count\":%zu,"
+      "\"sah_cost\":%.4f,\"nodes_per_ray\":%.4f,\"boxes_per_ray\":%.4f,\"cold_ns\":%.2f,\"hot_ns\":%.2f}\n",
+      scene.name.c_str(), scene.boxes.size(), name.c_str(), set.rays.size(), tree.stats().sah_cost,
+      per_ray.nodes_visited_per_ray(), per_ray.boxes_tested_per_ray(), cold, hot);
+}
+
+/// kdspace's profile on one scene (1 thread): its tree and, per ray set, the work and time per ray
+/// (print_profile_row); the closest-hit sets also split into the rays that hit and those that miss,
+/// which walk the tree very differently (a ray that hits crosses the finely cut space around the
+/// surface).
 void print_profile(const Scene& scene, const std::array<RaySet, 3>& sets) {
   const kdspace::BoxTree tree(scene.boxes);
   const kdspace::BoxTreeStats& t = tree.stats();
@@ -788,33 +820,16 @@ void print_profile(const Scene& scene, const std::array<RaySet, 3>& sets) {
       t.sah_cost, t.nodes, t.leaves, t.empty_leaves, t.depth, t.references_per_box,
       dbl(tree.memory_bytes()) / 1e6);
   std::printf(
-      "| rays | nodes / ray | boxes tested / ray | ns / ray cold | ns / ray hot "
-      "|\n|---|---:|---:|---:|---:|\n");
+      "| rays | count | nodes / ray | boxes tested / ray | ns / ray cold | ns / ray hot "
+      "|\n|---|---:|---:|---:|---:|---:|\n");
   for (const RaySet& set : sets) {
-    kdspace::RayStats stats;
-    auto trace = [&](const Ray& r) {
-      if (set.any_hit)
-        tree.any_hit(r, set.t_min, set.t_max, &stats);
-      else
-        tree.closest_hit(r, set.t_min, set.t_max, &stats);
-    };
-    const Stopwatch once;
-    for (const Ray& r : set.rays) trace(r);
-    const double cold = once.seconds() * 1e9 / dbl(set.rays.size());
-    const kdspace::RayStats per_ray = stats;
-    const Stopwatch twice;
-    for (const Ray& r : set.rays) {
-      trace(r);
-      trace(r);
-    }
-    const double hot = twice.seconds() * 1e9 / dbl(set.rays.size()) - cold;
-    std::printf("| %s | %.2f | %.2f | %.1f | %.1f |\n", set.name, per_ray.nodes_visited_per_ray(),
-                per_ray.boxes_tested_per_ray(), cold, hot);
-    std::printf(
-        "{\"bench\":\"rays-profile\",\"scene\":\"%s\",\"boxes\":%zu,\"rays\":\"%s\",\"sah_cost\":%.4f,"
-        "\"nodes_per_ray\":%.4f,\"boxes_per_ray\":%.4f,\"cold_ns\":%.2f,\"hot_ns\":%.2f}\n",
-        scene.name.c_str(), scene.boxes.size(), set.name, t.sah_cost, per_ray.nodes_visited_per_ray(),
-        per_ray.boxes_tested_per_ray(), cold, hot);
+    print_profile_row(scene, tree, set, set.name);
+    if (set.any_hit) continue;
+    RaySet hitting{set.name, false, {}, set.t_min, set.t_max}, missing = hitting;
+    for (const Ray& r : set.rays)
+      (tree.closest_hit(r, set.t_min, set.t_max).hit() ? hitting : missing).rays.push_back(r);
+    print_profile_row(scene, tree, hitting, std::string(set.name) + ", hitting");
+    print_profile_row(scene, tree, missing, std::string(set.name) + ", missing");
   }
 }
 
