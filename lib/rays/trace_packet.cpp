@@ -134,9 +134,9 @@ void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats&
           const LeafBlock* blocks = blocks_.data() + node.first() / 4;
           const std::uint32_t* ids = references_.data() + node.first();
           for (std::uint32_t first = 0; first < count; first += 4, ++blocks, ids += 4) {
+            // No mask on the lanes past count: they repeat the last box (as in traverse.cpp).
             unsigned lanes =
                 detail::block_candidates<float>(*blocks, lane_ray[l], range.t_min, best_bound[l]);
-            if (count - first < 4) lanes &= (1u << (count - first)) - 1;
             while (lanes != 0) {
               const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
               lanes &= lanes - 1;
