@@ -10,6 +10,7 @@
 // the key interleaves the bits of the cell coordinates.)
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -26,36 +27,44 @@ inline constexpr std::size_t morton_max_dim = 8;
 template <class T>
 std::vector<std::size_t> morton_order(const T* rows, std::size_t first, std::size_t last, std::size_t dim, const T* lo,
                                       const T* hi) {
-  const std::size_t bits = 32 / dim;  // per axis: 10 in 3-D, 16 in 2-D, 4 in 8-D
+  const std::size_t count = last - first;
+  if (count == 0) return {};
+  // Bits per axis: enough for about 8 cells per row (uniform rows), at most 16 an axis and 32 in all;
+  // fewer bits
+  // mean fewer radix passes, and a finer order than the rows' spacing buys nothing.
+  std::size_t count_bits = 0;
+  while (count >> count_bits) ++count_bits;
+  const std::size_t bits = std::min({std::size_t{16}, 32 / dim, (count_bits + 3 + dim - 1) / dim});
   const double cells = static_cast<double>(std::uint64_t{1} << bits);
-  const std::uint32_t last_cell = static_cast<std::uint32_t>((std::uint64_t{1} << bits) - 1);
+  const double top = cells - 1;  // the last cell's number
   // spread[v]: the bits of byte v placed dim apart (bit i at i * dim).
-  std::array<std::uint32_t, 256> spread{};
-  for (std::uint32_t v = 0; v < 256; ++v)
-    for (std::size_t i = 0; i < 8 && i * dim < 32; ++i) spread[v] |= ((v >> i) & 1u) << (i * dim);
+  // (Bits beyond 32 fall off; a cell has at most 32 / dim bits, so they are never set.)
+  // spread_high[v]: the same for the cell's second byte (bits > 8 happens only up to 3-D).
+  std::array<std::uint32_t, 256> spread{}, spread_high{};
+  for (std::uint32_t v = 1; v < 256; ++v) {
+    spread[v] = (dim < 32 ? spread[v >> 1] << dim : 0u) | (v & 1u);
+    spread_high[v] = bits > 8 ? spread[v] << (8 * dim) : 0u;
+  }
   // Grid scale in double: hi - lo may overflow a float.
   std::vector<double> scale(dim);
   for (std::size_t a = 0; a < dim; ++a) {
     const double extent = static_cast<double>(hi[a]) - static_cast<double>(lo[a]);
     scale[a] = extent > 0 ? cells / extent : 0;
   }
-  const std::size_t count = last - first;
   std::vector<std::uint64_t> keyed(count), sorted(count);  // Z-order key, then the row's offset
   for (std::size_t i = 0; i < count; ++i) {
     const T* x = rows + (first + i) * dim;
     std::uint32_t key = 0;
     for (std::size_t a = 0; a < dim; ++a) {
+      // Clamped to the grid without a branch; a NaN (infinite extent times a zero scale) goes to cell 0.
       const double t = (static_cast<double>(x[a]) - static_cast<double>(lo[a])) * scale[a];
-      const std::uint32_t cell = t <= 0 ? 0u : t >= cells ? last_cell : static_cast<std::uint32_t>(t);
-      std::uint32_t spread_cell = 0;
-      for (std::size_t byte = 0; byte * 8 < bits; ++byte)
-        spread_cell |= spread[(cell >> (8 * byte)) & 0xffu] << (8 * byte * dim);
-      key |= spread_cell << a;
+      const std::uint32_t cell = static_cast<std::uint32_t>(std::min(top, std::max(0.0, t)));
+      key |= (spread[cell & 0xffu] | spread_high[cell >> 8]) << a;
     }
     keyed[i] = (std::uint64_t{key} << 32) | i;
   }
-  // LSD radix sort on the key's four bytes; stable, so equal keys keep the rows' order.
-  for (unsigned shift = 32; shift < 64; shift += 8) {
+  // LSD radix sort on the key's bytes; stable, so equal keys keep the rows' order.
+  for (std::size_t shift = 32; shift < 32 + bits * dim; shift += 8) {
     std::array<std::size_t, 257> start{};
     for (const std::uint64_t k : keyed) ++start[((k >> shift) & 0xffu) + 1];
     if (start[((keyed[0] >> shift) & 0xffu) + 1] == count) continue;  // one bucket: nothing moves
