@@ -1092,9 +1092,9 @@ TEST_CASE("exact: knn_batch and radius_batch on 1, 2 and 4 threads give the sing
 
 TEST_CASE("exact: knn_batch on a tree larger than the caches, its queries reordered by leaf, gives the single-query answers",
           "[points][exact][threads]") {
-  // A batch visits its queries in leaf order only when the tree outgrows the caches (8 MiB): this
-  // tree of 600k 3-D points is the one here that does.
-  const Case c{Shape::clustered, 600000, 3, 14700};
+  // Beyond 8-D (where batches are not put in Z-order) a batch visits its queries in leaf order only
+  // when the tree outgrows the caches (8 MiB): this tree of 240k 9-D points is the one here that does.
+  const Case c{Shape::clustered, 240000, 9, 14700};
   const auto pts = make_points<float>(c.shape, c.n, c.dim, c.seed);
   const auto queries = make_queries<float>(c.shape, pts, c.n, c.dim, 300, c.seed + 1);
   const PointTree<float> tree(pts.data(), c.n, c.dim);

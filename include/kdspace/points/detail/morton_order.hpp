@@ -30,8 +30,7 @@ std::vector<std::size_t> morton_order(const T* rows, std::size_t first, std::siz
   const std::size_t count = last - first;
   if (count == 0) return {};
   // Bits per axis: enough for about 8 cells per row (uniform rows), at most 16 an axis and 32 in all;
-  // fewer bits
-  // mean fewer radix passes, and a finer order than the rows' spacing buys nothing.
+  // fewer bits mean fewer radix passes, and a finer order than the rows' spacing buys nothing.
   std::size_t count_bits = 0;
   while (count >> count_bits) ++count_bits;
   const std::size_t bits = std::min({std::size_t{16}, 32 / dim, (count_bits + 3 + dim - 1) / dim});
