@@ -578,9 +578,10 @@ class PointTree {
   // nodes and points found in cache. Answered in any order a query's answer is the same; only the
   // time differs. Up to morton_max_dim dimensions the order is the Z-order of the queries' cells in
   // the tree's bounds (detail/morton_order.hpp): linear work, no descent. Measured (CPU time, one
-  // thread, held-out queries in random order) on real 3-D scans, where the tree fits in the caches
-  // and the branches are the cost: 1-NN batches 1.25-1.3x the queries a second of the given order
-  // on building (90k points) and armadillo (23k), 10-NN 1.1-1.2x. Beyond that dimension the key is
+  // thread, held-out queries in random order, busy machine) on real 3-D scans, where the tree fits
+  // in the caches and the branches are the cost: 1-NN batches 1.2-1.4x the queries a second of the
+  // given order on building (90k points) and armadillo (23k), 10-NN 1.0-1.2x; none on kitten (4.7k
+  // points, 521 queries), whose repeated batch the branch predictor learns. Beyond 8-D the key is
   // the leaf each query's descent reaches, which pays only where the tree outgrows the caches
   // (locality_bytes): 1.75x for 10-NN on 1e6 uniform 3-D points, but a descent per query to sort.
   // Small batches keep their order.
