@@ -25,8 +25,8 @@ inline constexpr std::size_t morton_max_dim = 8;
 /// finite) in Z-order of their cells in a grid over the box [lo, hi] (rows outside it count as in
 /// its nearest cell); rows in one cell keep their order. last - first < 2^32.
 template <class T>
-std::vector<std::size_t> morton_order(const T* rows, std::size_t first, std::size_t last, std::size_t dim, const T* lo,
-                                      const T* hi) {
+std::vector<std::size_t> morton_order(const T* rows, std::size_t first, std::size_t last, std::size_t dim,
+                                      const T* lo, const T* hi) {
   const std::size_t count = last - first;
   if (count == 0) return {};
   // Bits per axis: enough for about 8 cells per row (uniform rows), at most 16 an axis and 32 in all;
