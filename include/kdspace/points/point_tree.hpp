@@ -583,10 +583,10 @@ class PointTree {
   // given order on building (90k points) and armadillo (23k), 10-NN 1.0-1.2x; none on kitten (4.7k
   // points, 521 queries), whose repeated batch the branch predictor learns. On uniform 3-D points
   // (a tenth held out) 1.5-1.7x for 1-NN and 1.3-1.4x for 10-NN at 2e5 points over the given order,
-  // 1.5x and 1.24x at 1e6 over the leaf order that follows. Beyond 8-D the key is
-  // the leaf each query's descent reaches, which pays only where the tree outgrows the caches
-  // (locality_bytes): 1.75x for 10-NN on 1e6 uniform 3-D points, but a descent per query to sort.
-  // Small batches keep their order.
+  // 1.5x and 1.24x at 1e6 over the leaf order that follows. Beyond 8-D the key is the leaf each
+  // query's descent reaches, which pays only where the tree outgrows the caches (locality_bytes;
+  // measured in 3-D before the Z-order: 1.75x for 10-NN on 1e6 uniform points), as the sort costs a
+  // descent per query. Small batches keep their order.
   std::vector<std::size_t> visit_order(const T* queries, std::size_t first, std::size_t last) const {
     std::vector<std::size_t> visit(last - first);
     if (last - first < locality_batch || last > UINT32_MAX ||
