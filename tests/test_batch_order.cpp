@@ -40,13 +40,6 @@ std::uint64_t reference_key(const float* x, std::size_t dim, const float* lo, co
   return key;
 }
 
-/// The bits per axis morton_order uses for `count` rows (its documented rule).
-std::size_t bits_for(std::size_t count, std::size_t dim) {
-  std::size_t count_bits = 0;
-  while (count >> count_bits) ++count_bits;
-  return std::min({std::size_t{16}, 32 / dim, (count_bits + 3 + dim - 1) / dim});
-}
-
 }  // namespace
 
 TEST_CASE("morton_order is a permutation of the rows, in ascending Z-order key, stable within a cell",
@@ -69,7 +62,7 @@ TEST_CASE("morton_order is a permutation of the rows, in ascending Z-order key, 
       std::vector<std::size_t> sorted = order;
       std::sort(sorted.begin(), sorted.end());
       for (std::size_t i = 0; i < sorted.size(); ++i) REQUIRE(sorted[i] == first + i);
-      const std::size_t bits = bits_for(last - first, dim);
+      const std::size_t bits = kdspace::detail::morton_bits_per_axis(last - first, dim);
       for (std::size_t i = 1; i < order.size(); ++i) {
         const std::uint64_t before =
             reference_key(rows.data() + order[i - 1] * dim, dim, lo.data(), hi.data(), bits);

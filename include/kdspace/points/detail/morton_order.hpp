@@ -21,6 +21,15 @@ namespace kdspace::detail {
 /// Dimensions up to this get a Z-order key of at least 4 bits an axis in 32 bits.
 inline constexpr std::size_t morton_max_dim = 8;
 
+/// Bits per axis of the grid for a batch of `count` rows: enough for about 8 cells per row (uniform
+/// rows), at most 16 an axis and 32 in all; fewer bits mean fewer radix passes, and a finer order than
+/// the rows' spacing buys nothing.
+inline std::size_t morton_bits_per_axis(std::size_t count, std::size_t dim) {
+  std::size_t count_bits = 0;
+  while (count >> count_bits) ++count_bits;
+  return std::min({std::size_t{16}, 32 / dim, (count_bits + 3 + dim - 1) / dim});
+}
+
 /// The numbers first .. last - 1 of rows (row-major, `dim` coordinates, dim <= morton_max_dim,
 /// finite) in Z-order of their cells in a grid over the box [lo, hi] (rows outside it count as in
 /// its nearest cell); rows in one cell keep their order. last - first < 2^32.
@@ -29,11 +38,7 @@ std::vector<std::size_t> morton_order(const T* rows, std::size_t first, std::siz
                                       const T* lo, const T* hi) {
   const std::size_t count = last - first;
   if (count == 0) return {};
-  // Bits per axis: enough for about 8 cells per row (uniform rows), at most 16 an axis and 32 in all;
-  // fewer bits mean fewer radix passes, and a finer order than the rows' spacing buys nothing.
-  std::size_t count_bits = 0;
-  while (count >> count_bits) ++count_bits;
-  const std::size_t bits = std::min({std::size_t{16}, 32 / dim, (count_bits + 3 + dim - 1) / dim});
+  const std::size_t bits = morton_bits_per_axis(count, dim);
   const double cells = static_cast<double>(std::uint64_t{1} << bits);
   const double top = cells - 1;  // the last cell's number
   // spread[v]: the bits of byte v placed dim apart (bit i at i * dim).
