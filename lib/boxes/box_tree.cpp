@@ -167,15 +167,10 @@ BoxTree::BoxTree(BoxTreeParts p) : params_(p.params) {
   if (n >= (std::size_t{1} << 30)) fail("too many boxes: " + std::to_string(n));
   if (p.max_depth > max_box_tree_depth)
     fail("depth cap " + std::to_string(p.max_depth) + " above " + std::to_string(max_box_tree_depth));
-  // The messages are made only for a box or node that fails (a million strings would take most of
-  // a mapped load's time).
-  auto sound = [](const Box3f& b) {
-    for (int a = 0; a < 3; ++a)
-      if (!(std::isfinite(b.lo[a]) && std::isfinite(b.hi[a]) && b.lo[a] <= b.hi[a])) return false;
-    return true;
-  };
-  for (std::size_t i = 0; i < n; ++i)
-    if (!sound(p.boxes[i])) fail("box " + std::to_string(i + 1) + ": " + box_problem(p.boxes[i]));
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::string problem = box_problem(p.boxes[i]);  // empty (no allocation) for a sound box
+    if (!problem.empty()) fail("box " + std::to_string(i + 1) + ": " + problem);
+  }
   const std::size_t refs = p.references.size();
   if (p.nodes.size() >= (std::size_t{1} << 28) || refs >= (std::size_t{1} << 30))
     fail("more than 2^28 nodes or 2^30 references");
