@@ -137,14 +137,15 @@ class RowQueries {
 template <class T>
 void select_nearest(std::vector<Candidate<T>>& found, std::size_t keep, std::vector<std::uint64_t>& keys) {
   if constexpr (std::is_same_v<T, float>) {
-    keys.resize(found.size());
-    for (std::size_t i = 0; i < found.size(); ++i) {
+    const std::size_t count = found.size();
+    if (keys.size() < count) keys.resize(count);  // never shrunk: no zeroing when it grows back
+    for (std::size_t i = 0; i < count; ++i) {
       std::uint32_t bits;
       std::memcpy(&bits, &found[i].dist, sizeof bits);
       keys[i] = std::uint64_t{bits} << 32 | found[i].index;
     }
     const auto cut = keys.begin() + static_cast<std::ptrdiff_t>(keep);
-    if (keep < keys.size()) std::nth_element(keys.begin(), cut, keys.end());
+    if (keep < count) std::nth_element(keys.begin(), cut, keys.begin() + static_cast<std::ptrdiff_t>(count));
     std::sort(keys.begin(), cut);
     for (std::size_t i = 0; i < keep; ++i) {
       const std::uint32_t bits = static_cast<std::uint32_t>(keys[i] >> 32);
@@ -186,8 +187,7 @@ class GraphBuilder {
     void start(std::size_t n) {
       if (seen.size() != n) seen.assign(n, 0), token = 0;
       if (++token == 0) std::fill(seen.begin(), seen.end(), 0u), token = 1;
-      rows.clear();
-      found.clear();
+      rows.clear();  // (found keeps its size: score() resizes it, zeroing only what it adds)
     }
     /// Adds `row` unless it is there already; whether it was added.
     bool add(std::uint32_t row) {
