@@ -262,9 +262,13 @@ ForestTuning PointForest<T>::tune_on(double target_recall, std::size_t k, const 
     std::size_t& budget = best.ef > 0 ? best.ef : best.checks;
     auto short_of_target = [&](const Outcome& o) { return o.recall - 1.28 * o.recall_error < target_recall; };
     Outcome held_out = evaluate(best.search(), validation_first, validation_count, exact_validation);
+    bool widened = false;
     while (short_of_target(held_out) && budget < cap) {
       budget = std::min(budget + std::max<std::size_t>(1, budget / 8), cap);
       held_out = evaluate(best.search(), validation_first, validation_count, exact_validation);
+      widened = true;
+    }
+    if (widened) {  // what the tuning queries give at the budget kept
       const Outcome tuned = evaluate(best.search(), 0, half, exact_tuning);
       best.tuning_recall = tuned.recall;
       best.queries_per_s = static_cast<double>(half) / tuned.seconds;
