@@ -3,7 +3,7 @@
 //  1. Candidates from the trees. A tree's leaf order puts near points near each other, so each
 //     point is scored against the `window` points around it in the leaf order of each of the first
 //     `window_trees` trees (once, if it meets a point in several), and keeps the nearest it met: a
-//     list of `degree` candidates.
+//     list of degree + degree / 8 candidates.
 //  2. A search for each point's neighbours. The candidate lists, cut short (rough_degree()),
 //     already form a graph; each point searches it for itself (graph_search.hpp, pool `build_ef`,
 //     by default from the data's intrinsic dimension as the lists show it), starting from its own
@@ -57,11 +57,13 @@ constexpr std::size_t most_rough_degree = 16;
 /// 24 it cost recall at every ef (0.99 took ef 192 instead of 128 in kdspace-ann-bench), so a pool
 /// of 24 or more keeps 16.
 inline std::size_t rough_degree(std::size_t ef) { return std::min(ef / 2 + 4, most_rough_degree); }
-/// The candidate lists (steps 1 to 3) hold `degree` points, as the graph's lists do. Measured on
-/// 95k music and 100k speech frames and 100k image descriptors: lists of 40 (degree 32 and a
-/// quarter more) cost pruning 30% more CPU (music 0.128 -> 0.166 s, one thread) for a graph that
-/// scored as many points a query or more at recall 0.99 (music 365 at ef 27 against 350 at ef 30;
-/// speech 275 against 247 at ef 19; images 1585 against 1537 at ef 128-136).
+/// The candidate lists (steps 1 to 3) hold degree + degree / 8 points (36 for a degree of 32).
+/// Measured on 95k music frames and 100k image descriptors (one thread, busy machine): lists of 40
+/// cost pruning about 15% more CPU (music 0.147 -> 0.166 s) for the same recall within 0.0005 at
+/// ef 28 (music 0.9911 / 0.9916) and ef 128 (images 0.9903 both); lists of 32 pruned faster still
+/// (0.128 s) but fell below recall 0.99 there (music 0.9893 at ef 28, images below 0.99 at ef 128),
+/// which cost kdspace-ann-bench the next ef on its grid (32, 192) and, on the images, two fifths
+/// of the q/s at recall 0.99.
 /// Work items a thread takes at a time.
 constexpr std::size_t chunk = 512;
 
@@ -164,7 +166,7 @@ class GraphBuilder {
  public:
   GraphBuilder(const U* rows, std::size_t n, std::size_t dim, const GraphBuildParams& params)
       : rows_(rows), n_(n), dim_(dim), params_(params), workers_(resolve_threads(params.threads)),
-        lists_(n, params.degree) {}
+        lists_(n, params.degree + params.degree / 8) {}
 
   NeighborGraph build(const std::vector<const std::uint32_t*>& tree_orders, std::size_t* pool_used) {
     score_windows(tree_orders);
@@ -263,20 +265,17 @@ class GraphBuilder {
     return g;
   }
 
-  /// The automatic pool of step 2: twice the intrinsic dimension of the data, within 14..24. Points
+  /// The automatic pool of step 2: twice the intrinsic dimension of the data, within 16..24. Points
   /// of a low intrinsic dimension have few directions to find neighbours in, and a small pool finds
   /// them: on 95k music frames and 100k speech frames (20-D and 39-D MFCC, estimated 7.0 and 7.1) a
-  /// pool of 16 instead of 24 cut step 2's CPU time by a third for recall at ef 32 within 0.002, and
-  /// 14 instead of 16 cut it by a further 12-18% (music 0.228 -> 0.200 s, speech 0.274 -> 0.225 s,
-  /// one thread, busy machine) for recall at ef 32 within 0.0015 (at ef 20: music 0.9803 -> 0.9776,
-  /// speech 0.9915 -> 0.9898; a pool of 12 cost more: music needed ef 35 for 0.99, not 30),
+  /// pool of 16 instead of 24 cut step 2's CPU time by a third for recall at ef 32 within 0.002,
   /// while on 100k image descriptors (128-D, estimated 13.3) it raised the ef that tune(0.99) chose
   /// from 176 to 286 (and 255 with a pool of 20). The estimate is the maximum-likelihood one of
   /// Levina & Bickel (NIPS 2004) from each point's 10 nearest candidates after step 1, averaged
   /// over every point or about 10,000 of them (the average of the inverses, as MacKay & Ghahramani
   /// propose, gave 5.7, 5.9 and 9.2: too close together to place a rule between them).
   std::size_t pool_for_intrinsic_dimension() const {
-    constexpr std::size_t k = 10, least = 14, most = 24;
+    constexpr std::size_t k = 10, least = 16, most = 24;
     const std::size_t stride = std::max<std::size_t>(1, n_ / 10000);
     double sum_of_estimates = 0;
     std::size_t points = 0;

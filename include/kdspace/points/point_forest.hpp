@@ -91,7 +91,7 @@ struct ForestParams {
   std::size_t graph_degree = 32;
   /// Pool of the search that finds each point's neighbours while the graph is built: larger builds
   /// slower, and a graph that reaches a recall with fewer points scored. 0 (the default): from the
-  /// data, twice its intrinsic dimension as estimated from the trees' candidates, within 14..24
+  /// data, twice its intrinsic dimension as estimated from the trees' candidates, within 16..24
   /// (params() then reports the pool chosen).
   std::size_t graph_build_ef = 0;
   /// Slack of the graph's pruning rule (>= 1): a point's neighbour c is dropped when one kept before
