@@ -109,6 +109,19 @@ TEST_CASE("index: the CRC-32C of two ranges combines into the CRC-32C of both", 
   }
 }
 
+TEST_CASE("index: the CRC-32C extended piece by piece is the CRC-32C of the whole", "[index]") {
+  std::mt19937 rng(7);
+  std::vector<unsigned char> data(70000);
+  for (auto& b : data) b = static_cast<unsigned char>(rng());
+  for (std::size_t piece : {1, 13, 288, 12288, 20000}) {
+    CAPTURE(piece);
+    std::uint32_t crc = 0;  // the CRC-32C of nothing
+    for (std::size_t at = 0; at < data.size(); at += piece)
+      crc = io::detail::crc32c_extend(crc, data.data() + at, std::min(piece, data.size() - at));
+    REQUIRE(crc == io::detail::crc32c(data.data(), data.size()));
+  }
+}
+
 TEMPLATE_TEST_CASE("index: a saved point tree loads, mapped or read, with the same nodes and answers",
                    "[index]", float, double) {
   using T = TestType;

@@ -119,11 +119,15 @@ bool has_sse42() {
 }  // namespace
 
 std::uint32_t crc32c(const void* data, std::size_t size) {
+  return crc32c_extend(0, data, size);
+}
+
+std::uint32_t crc32c_extend(std::uint32_t crc, const void* data, std::size_t size) {
   const auto* p = static_cast<const unsigned char*>(data);
 #if defined(__x86_64__)
-  if (has_sse42()) return ~update_hardware(0xFFFFFFFFu, p, size);
+  if (has_sse42()) return ~update_hardware(~crc, p, size);
 #endif
-  return ~update_software(0xFFFFFFFFu, p, size);
+  return ~update_software(~crc, p, size);
 }
 
 std::uint32_t crc32c_combine(std::uint32_t crc_a, std::uint32_t crc_b, std::size_t length_b) {

@@ -12,6 +12,10 @@ namespace kdspace::io::detail {
 /// "123456789" is 0xE3069283). Uses the SSE4.2 crc32 instruction where the processor has it.
 std::uint32_t crc32c(const void* data, std::size_t size);
 
+/// The CRC-32C of A followed by `size` more bytes, from crc32c(A) (0 for an empty A): lets a reader
+/// checksum a range piece by piece as it goes.
+std::uint32_t crc32c_extend(std::uint32_t crc, const void* data, std::size_t size);
+
 /// The CRC-32C of A followed by B, from crc32c(A), crc32c(B) and B's length: crc(A) times
 /// x^(8 |B|) mod P, plus crc(B) (the initial and final inversions cancel). Lets several threads check
 /// parts of one range.
