@@ -322,8 +322,8 @@ TEST_CASE("index: a large file, checked in chunks on two threads, still catches 
   // checked on a second thread: a byte changed at either side of every chunk boundary, in the middle
   // of every chunk and at the ends of every section is caught, mapped and read.
   TempDir tmp;
-  const std::size_t n = std::size_t{3} << 16;  // above kdspace::detail::parallel_order_check
-  REQUIRE(n >= kdspace::detail::parallel_order_check);
+  const std::size_t n = std::size_t{3} << 16;  // above kdspace::detail::parallel_tree_check
+  REQUIRE(n >= kdspace::detail::parallel_tree_check);
   const auto points = kdspace_test::make_points<float>(Shape::uniform, n, 3, 8);
   const PointTree<float> tree(points.data(), n, 3);
   const std::string path = tmp.file("large.kdx");
@@ -364,7 +364,7 @@ TEST_CASE("index: a point order that is no permutation is named, in a tree check
           "[index][errors]") {
   // With every checksum resealed, only the structural checks stand in the way: the message names the
   // first index that is out of range or given twice, as the one-thread check did.
-  const std::size_t n = kdspace::detail::parallel_order_check + 1000;
+  const std::size_t n = kdspace::detail::parallel_tree_check + 1000;
   const auto points = kdspace_test::make_points<float>(Shape::clustered, n, 3, 9);
   const PointTree<float> tree(points.data(), n, 3);
   TempDir tmp;

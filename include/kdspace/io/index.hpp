@@ -21,8 +21,6 @@
 #include <memory>
 #include <optional>
 #include <string>
-#include <system_error>
-#include <thread>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -33,6 +31,7 @@
 #include "kdspace/metric.hpp"
 #include "kdspace/points/dynamic_point_tree.hpp"
 #include "kdspace/points/point_forest.hpp"
+#include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/point_tree.hpp"
 
 namespace kdspace::io {
@@ -142,24 +141,22 @@ std::size_t level_for(std::size_t n, std::size_t base_capacity);
 /// Checksums::deferred, while a second thread checks the file's checksums; when load is done, the
 /// calling thread takes its share of what is left of them (IndexFile::ChecksumPass), so that the
 /// two threads share the whole work. The structural checks are safe on any bytes. A checksum error
-/// wins over load's (it explains any other). The loaders that take a path work this way.
+/// wins over load's (it explains any other). The loaders that take a path work this way, but for the
+/// point tree's, whose check shares its own two threads with the checksums (below).
 template <class Load>
 auto load_with_checksums(const std::shared_ptr<const IndexFile>& file, Load load) {
   IndexFile::ChecksumPass checksums(*file);
-  std::thread helper;
-  try {
-    helper = std::thread([&checksums] { checksums.run(); });
-  } catch (const std::system_error&) {  // no thread to be had: the calling thread does it all
-  }
   std::optional<decltype(load(file))> result;
   std::exception_ptr load_error;
-  try {
-    result.emplace(load(file));
-  } catch (...) {
-    load_error = std::current_exception();
-  }
-  checksums.run();
-  if (helper.joinable()) helper.join();
+  kdspace::detail::fork_join([&checksums] { checksums.run(); },
+                             [&] {
+                               try {
+                                 result.emplace(load(file));
+                               } catch (...) {
+                                 load_error = std::current_exception();
+                               }
+                               checksums.run();
+                             });
   checksums.finish();
   if (load_error) std::rethrow_exception(load_error);
   return std::move(*result);
@@ -169,6 +166,41 @@ namespace detail {
 template <class Load>
 auto load_checked(const std::string& path, LoadMode mode, Load load) {
   return load_with_checksums(IndexFile::open(path, mode, Checksums::deferred), load);
+}
+
+/// The checksums of a point tree's file, taken beside its structural check (a CheckCompanion): the
+/// points section by the two walks that read it, each range just before it is read (so each byte comes
+/// from memory once), and the other sections in chunks, by whichever thread is done first.
+class PointTreeChecksums final : public kdspace::detail::CheckCompanion {
+ public:
+  PointTreeChecksums(const IndexFile& file, std::size_t row_bytes)
+      : pass_(file, file.find(SectionType::points)), row_bytes_(row_bytes) {}
+  void split(std::size_t first_row) override { pass_.split(first_row * row_bytes_); }
+  void rows(int walk, std::size_t end_row) override { pass_.stream(walk, end_row * row_bytes_); }
+  void help() override { pass_.run(); }
+  /// Throws Error naming the first damaged section.
+  void finish() { pass_.finish(); }
+
+ private:
+  IndexFile::ChecksumPass pass_;
+  std::size_t row_bytes_;
+};
+
+template <class T, int Dim, class Metric>
+PointTree<T, Dim, Metric> point_tree_of(const std::shared_ptr<const IndexFile>& file,
+                                        kdspace::detail::CheckCompanion* companion) {
+  detail::expect_header(*file, {IndexKind::point_tree}, detail::scalar_of<T>(), detail::metric_of<Metric>(),
+                        Dim == Dynamic ? 0 : static_cast<std::size_t>(Dim));
+  auto parts = detail::tree_sections<T>(file, 0, detail::read_point_tree_params(*file));
+  if (parts.order.size() != file->info().count)
+    file->fail("the header says " + std::to_string(file->info().count) + " points, the tree holds " +
+               std::to_string(parts.order.size()));
+  parts.companion = companion;
+  try {
+    return PointTree<T, Dim, Metric>(std::move(parts), detail::metric_from<Metric>(*file));
+  } catch (const Error& e) {
+    file->fail(e.what());
+  }
 }
 }  // namespace detail
 
@@ -186,24 +218,22 @@ void save(const std::string& path, const PointTree<T, Dim, Metric>& tree) {
 
 template <class T, int Dim = Dynamic, class Metric = L2>
 PointTree<T, Dim, Metric> load_point_tree(const std::shared_ptr<const IndexFile>& file) {
-  detail::expect_header(*file, {IndexKind::point_tree}, detail::scalar_of<T>(), detail::metric_of<Metric>(),
-                        Dim == Dynamic ? 0 : static_cast<std::size_t>(Dim));
-  auto parts = detail::tree_sections<T>(file, 0, detail::read_point_tree_params(*file));
-  if (parts.order.size() != file->info().count)
-    file->fail("the header says " + std::to_string(file->info().count) + " points, the tree holds " +
-               std::to_string(parts.order.size()));
-  try {
-    return PointTree<T, Dim, Metric>(std::move(parts), detail::metric_from<Metric>(*file));
-  } catch (const Error& e) {
-    file->fail(e.what());
-  }
+  return detail::point_tree_of<T, Dim, Metric>(file, nullptr);
 }
 
 template <class T, int Dim = Dynamic, class Metric = L2>
 PointTree<T, Dim, Metric> load_point_tree(const std::string& path, LoadMode mode = LoadMode::map) {
-  return detail::load_checked(path, mode, [](const std::shared_ptr<const IndexFile>& file) {
-    return load_point_tree<T, Dim, Metric>(file);
-  });
+  const auto file = IndexFile::open(path, mode, Checksums::deferred);
+  detail::PointTreeChecksums checksums(*file, static_cast<std::size_t>(file->info().dim) * sizeof(T));
+  std::optional<PointTree<T, Dim, Metric>> tree;
+  try {
+    tree.emplace(detail::point_tree_of<T, Dim, Metric>(file, &checksums));
+  } catch (const Error&) {
+    checksums.finish();  // a damaged section explains any other problem: its message wins
+    throw;
+  }
+  checksums.finish();
+  return std::move(*tree);
 }
 
 // ---- DynamicPointTree ----------------------------------------------------------------------------------

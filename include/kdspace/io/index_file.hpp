@@ -181,22 +181,41 @@ class IndexFile {
 
   /// The sections' checksums as chunks of a fixed size that several threads share: each calls run(),
   /// which takes chunks until none is left; once all have returned, finish() combines each section's
-  /// chunk checksums (crc32c_combine) and throws Error naming the first damaged section.
+  /// chunk checksums (crc32c_combine) and throws Error naming the first damaged section (it checksums
+  /// itself whatever is left, so that it always judges every byte).
+  ///
+  /// One section may be `streamed` instead: left out of the shared chunks, it is checksummed by the
+  /// two threads that read it anyway (a point tree's walks over its points), each over its own range
+  /// of it (split() sets where the second begins) as it goes (stream(walk, end): the bytes up to `end`
+  /// are about to be read), so that each byte is read from memory once. finish() checksums whatever
+  /// of the section the streams did not reach, so its result never depends on how far they got.
   class ChecksumPass {
    public:
-    explicit ChecksumPass(const IndexFile& file);
+    explicit ChecksumPass(const IndexFile& file, const SectionEntry* streamed = nullptr);
     void run();
-    void finish() const;
+    /// The second stream's range starts at byte `at` of the streamed section (by default at its end).
+    void split(std::uint64_t at);
+    /// Stream `walk` (0 or 1; one thread each) checksums its range up to byte `end` of the section, and
+    /// a little beyond (a chunk at a time, within its range).
+    void stream(int walk, std::uint64_t end);
+    void finish();
 
    private:
     struct Chunk {
       std::size_t section;
       std::uint64_t offset, length;
     };
+    // A range [begin, end) of the streamed section's bytes, checksummed up to `done`.
+    struct Stream {
+      std::uint64_t begin = 0, done = 0, end = 0;
+      std::uint32_t crc = 0;
+    };
     const IndexFile& file_;
     std::vector<Chunk> chunks_;
     std::vector<std::uint32_t> crcs_;
     std::atomic<std::size_t> next_{0};
+    const SectionEntry* streamed_;
+    Stream streams_[2];
   };
 
   /// Throws Error("PATH: what").

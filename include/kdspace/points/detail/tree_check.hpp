@@ -16,11 +16,10 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <future>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
-#include <system_error>
 #include <type_traits>
 #include <vector>
 
@@ -31,12 +30,28 @@
 #include "kdspace/detail/storage.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/node.hpp"
+#include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/params.hpp"
 
 namespace kdspace::detail {
 
 /// The deepest tree a search accepts: the builder's cap on max_depth.
 inline constexpr std::size_t max_tree_depth = 256;
+
+/// Work a loader shares the tree check's threads with: the checksums of the file the parts come from.
+/// The check splits the points in two ranges, [0, first_row) and [first_row, n), walked by two threads
+/// (walks 0 and 1), and tells the companion which rows each walk is about to read, so that the
+/// companion can checksum them just before (they are then read from memory once).
+class CheckCompanion {
+ public:
+  virtual ~CheckCompanion() = default;
+  /// Before the walks start: walk 1 reads rows [first_row, n), walk 0 those before.
+  virtual void split(std::size_t first_row) = 0;
+  /// Walk 0 or 1 (one thread each) is about to read its rows up to `end_row`.
+  virtual void rows(int walk, std::size_t end_row) = 0;
+  /// A thread done with its share of the check takes a share of the companion's own work.
+  virtual void help() = 0;
+};
 
 /// Everything a PointTree is made of. `backing` keeps borrowed storage alive (null when all is owned).
 template <class T>
@@ -48,6 +63,7 @@ struct PointTreeParts {
   Storage<PointNode<T>> nodes;      ///< depth first; nodes[0] is the root
   std::vector<T> root_lo, root_hi;  ///< bounds of all points (the root cell)
   std::shared_ptr<const void> backing;
+  CheckCompanion* companion = nullptr;  ///< work the check runs beside (not owned; used while it runs)
 };
 
 /// What the check works out on the way: the figures a PointTree keeps besides its arrays.
@@ -56,15 +72,14 @@ struct TreeShape {
   std::size_t leaves = 0;
 };
 
-/// Trees of at least this many points check their order on a second thread (a thread's start costs
-/// tens of microseconds, the check about a nanosecond a point).
-inline constexpr std::size_t parallel_order_check = std::size_t{1} << 17;
+/// Trees of at least this many points are checked on two threads (a thread's start costs tens of
+/// microseconds, the check a few nanoseconds a point).
+inline constexpr std::size_t parallel_tree_check = std::size_t{1} << 17;
 
 template <class T>
 class TreeChecker {
  public:
-  explicit TreeChecker(const PointTreeParts<T>& p)
-      : p_(p), n_(p.order.size()), dim_(p.dim), lo_(p.root_lo), hi_(p.root_hi) {}
+  explicit TreeChecker(const PointTreeParts<T>& p) : p_(p), n_(p.order.size()), dim_(p.dim) {}
 
   TreeShape run() {
     if (dim_ == 0) fail("dimension 0");
@@ -79,27 +94,17 @@ class TreeChecker {
       fail("max_depth " + std::to_string(p_.params.max_depth) + " above 256");
     if (p_.root_lo.size() != dim_ || p_.root_hi.size() != dim_) fail("bounds of the wrong dimension");
     for (std::size_t a = 0; a < dim_; ++a)
-      if (!std::isfinite(lo_[a]) || !std::isfinite(hi_[a]) || lo_[a] > hi_[a])
+      if (!std::isfinite(p_.root_lo[a]) || !std::isfinite(p_.root_hi[a]) || p_.root_lo[a] > p_.root_hi[a])
         fail("bounds of coordinate " + std::to_string(a + 1) + " are not finite and ordered");
-    // The order check and the walk over nodes and points read different arrays: for a large tree the
-    // order check runs on a second thread meanwhile. Errors come out as on one thread (the order's first).
-    std::future<void> order;
-    if (n_ >= parallel_order_check) order = start_order_check();
-    if (!order.valid()) check_order();
-    try {
-      visit(0);
-    } catch (const Error&) {
-      if (order.valid()) order.get();
-      throw;
+    if (n_ >= parallel_tree_check) {
+      try {
+        if (std::optional<TreeShape> shape = run_on_two_threads()) return *shape;
+      } catch (const Error&) {
+        // Something is wrong: the one-thread check below names the first problem, as it finds it.
+        return run_on_one_thread(nullptr);
+      }
     }
-    if (order.valid()) order.get();
-    if (next_node_ != p_.nodes.size())
-      fail("nodes " + std::to_string(next_node_) + " to " + std::to_string(p_.nodes.size() - 1) +
-           " are not reached from the root");
-    if (next_point_ != n_)
-      fail("the leaves hold points [0, " + std::to_string(next_point_) + "), expected [0, " +
-           std::to_string(n_) + ")");
-    return shape_;
+    return run_on_one_thread(p_.companion);
   }
 
  private:
@@ -108,40 +113,172 @@ class TreeChecker {
     fail("node " + std::to_string(id) + ": " + what);
   }
 
-  // check_order() on a second thread; no future when no thread is to be had.
-  std::future<void> start_order_check() {
-    try {
-      return std::async(std::launch::async, [this] { check_order(); });
-    } catch (const std::system_error&) {
-      return {};
-    }
+  // A depth-first walk over one subtree after another, in node order, each in its cell, checking
+  // that nodes and the leaves' points follow each other without a gap.
+  struct Walk {
+    int id = 0;                  // 0 or 1: which of the companion's streams it reads
+    std::vector<T> lo, hi;       // the root cell cut by the splits above the node being visited
+    std::size_t next_node = 0;   // the node the next visit must find
+    std::size_t next_point = 0;  // the point the next leaf must start at
+    TreeShape shape;
+    CheckCompanion* companion = nullptr;
+  };
+
+  // A subtree one walk checks whole: its root, depth and cell, and where it ends (set by the walk).
+  struct Subtree {
+    std::size_t root = 0, depth = 0;
+    std::vector<T> lo, hi;
+    std::size_t node_end = 0;
+  };
+
+  TreeShape run_on_one_thread(CheckCompanion* companion) {
+    if (companion) companion->split(n_);
+    check_order(0, n_, true);
+    Walk walk;
+    walk.lo = p_.root_lo;
+    walk.hi = p_.root_hi;
+    walk.companion = companion;
+    visit(walk, 0);
+    if (companion) companion->help();
+    if (walk.next_node != p_.nodes.size())
+      fail("nodes " + std::to_string(walk.next_node) + " to " + std::to_string(p_.nodes.size() - 1) +
+           " are not reached from the root");
+    if (walk.next_point != n_)
+      fail("the leaves hold points [0, " + std::to_string(walk.next_point) + "), expected [0, " +
+           std::to_string(n_) + ")");
+    return walk.shape;
   }
 
-  // A permutation of [0, n): n values below n whose bits cover [0, n) (a value given twice leaves
-  // another out). The loop only sets bits, without a branch on each value; a second pass finds the
-  // culprit for the message when the check fails.
-  void check_order() {
+  // The tree cut at a node near the middle of the node array: the path from the root down to it, the
+  // subtrees left of the path (walk 0, in node order, ending with the subtree under the path's last
+  // node when walk 1 has more), and those right of it (walk 1). Each walk also checks half of the point
+  // order, then helps the companion. No shape when the tree does not divide (its root is a leaf).
+  // Any problem throws, and run() starts over on one thread, whose message names it.
+  std::optional<TreeShape> run_on_two_threads() {
+    const std::size_t nodes = p_.nodes.size();
+    std::vector<Subtree> subtrees[2];
+    std::vector<Subtree> right_of_path;  // walk 1's, deepest first
+    std::vector<std::size_t> path;
+    std::vector<T> lo = p_.root_lo, hi = p_.root_hi;
+    std::size_t v = 0, end = nodes, depth = 0;
+    for (; depth < max_tree_depth; ++depth) {
+      const PointNode<T>& node = p_.nodes[v];
+      if (node.is_leaf() || end - v < nodes / 16) break;  // a sixteenth of the nodes either way: balanced
+      const std::size_t axis = node.axis(), right = node.right_child();
+      if (axis >= dim_ || !(node.left_max <= node.right_min) || !(v + 1 < right && right < end))
+        fail_node(v, "bad split");
+      path.push_back(v);
+      if (right <= nodes / 2) {  // the left subtree lies before the middle
+        subtrees[0].push_back({v + 1, depth + 1, lo, hi, 0});
+        subtrees[0].back().hi[axis] = std::min(hi[axis], node.left_max);
+        lo[axis] = std::max(lo[axis], node.right_min);
+        v = right;
+      } else {
+        right_of_path.push_back({right, depth + 1, lo, hi, 0});
+        right_of_path.back().lo[axis] = std::max(lo[axis], node.right_min);
+        hi[axis] = std::min(hi[axis], node.left_max);
+        end = right;
+        v = v + 1;
+      }
+    }
+    const std::size_t walk0_nodes = v - path.size(), walk1_nodes = nodes - end;
+    (walk0_nodes <= walk1_nodes ? subtrees[0] : subtrees[1]).push_back({v, depth, lo, hi, 0});
+    subtrees[1].insert(subtrees[1].end(), right_of_path.rbegin(), right_of_path.rend());
+    if (subtrees[0].empty() || subtrees[1].empty()) return std::nullopt;
+
+    // Walk 1 starts at the first point of its first leaf (the chain checks below confirm it).
+    std::size_t leftmost = subtrees[1].front().root;
+    for (std::size_t steps = 0; leftmost < nodes && !p_.nodes[leftmost].is_leaf(); ++steps, ++leftmost)
+      if (steps > max_tree_depth) fail("no leaf");
+    if (leftmost >= nodes || p_.nodes[leftmost].first() > n_) fail("no leaf");
+    const std::size_t split_point = p_.nodes[leftmost].first();
+
+    if (p_.companion) p_.companion->split(split_point);
+    Walk walks[2];  // each thread walks a copy of its own (two walks in one cache line would share it)
+    std::vector<std::uint64_t> seen[2];
+    auto share = [&](int w) {
+      Walk walk;
+      walk.id = w;
+      walk.lo.resize(dim_);
+      walk.hi.resize(dim_);
+      walk.companion = p_.companion;
+      walk.next_point = w == 0 ? 0 : split_point;
+      for (Subtree& s : subtrees[w]) {
+        walk.next_node = s.root;
+        std::copy(s.lo.begin(), s.lo.end(), walk.lo.begin());
+        std::copy(s.hi.begin(), s.hi.end(), walk.hi.begin());
+        visit(walk, s.depth);
+        s.node_end = walk.next_node;
+      }
+      seen[w] = check_order(w == 0 ? 0 : n_ / 2, w == 0 ? n_ / 2 : n_, false);
+      if (p_.companion) p_.companion->help();
+      walks[w] = std::move(walk);
+    };
+    fork_join([&] { share(1); }, [&] { share(0); });
+
+    // The pieces in node order, each starting where the one before ends: the path's nodes, then walk
+    // 0's subtrees and walk 1's in the order the path met them.
+    std::size_t expected = 0, path_at = 0, at[2] = {0, 0};
+    while (expected < nodes && (path_at < path.size() || at[0] < subtrees[0].size() || at[1] < subtrees[1].size())) {
+      if (path_at < path.size() && path[path_at] == expected) {
+        ++expected;
+        ++path_at;
+        continue;
+      }
+      bool found = false;
+      for (int w : {0, 1})
+        if (at[w] < subtrees[w].size() && subtrees[w][at[w]].root == expected) {
+          expected = subtrees[w][at[w]++].node_end;
+          found = true;
+          break;
+        }
+      if (!found) fail("pieces out of order");
+    }
+    if (expected != nodes || path_at != path.size() || at[0] != subtrees[0].size() ||
+        at[1] != subtrees[1].size() || walks[0].next_point != split_point || walks[1].next_point != n_)
+      fail("pieces out of order");
+    // Between them the halves of the order hold every index: n values, none missing, none twice.
+    for (std::size_t w = 0; w < seen[0].size(); ++w) seen[0][w] |= seen[1][w];
+    if (!all_seen(seen[0])) fail("the order is no permutation");
+    TreeShape shape;
+    shape.depth = std::max(walks[0].shape.depth, walks[1].shape.depth);
+    shape.leaves = walks[0].shape.leaves + walks[1].shape.leaves;
+    return shape;
+  }
+
+  // Whether the bits of [0, n) are all set.
+  bool all_seen(const std::vector<std::uint64_t>& seen) const {
+    std::uint64_t missing = 0;
+    for (std::size_t w = 0; w + 1 < seen.size(); ++w) missing |= ~seen[w];
+    const std::size_t tail = n_ % 64;
+    missing |= ~seen.back() & (tail ? (std::uint64_t{1} << tail) - 1 : ~std::uint64_t{0});
+    return missing == 0;
+  }
+
+  // The values order[begin, end) as bits of [0, n). The loop only sets bits, without a branch on each
+  // value. With `whole` (the order from 0 to n), also checks they are a permutation of [0, n) (n
+  // values whose bits cover [0, n): a value given twice leaves another out), and when they are not a
+  // second pass finds the culprit for the message.
+  std::vector<std::uint64_t> check_order(std::size_t begin, std::size_t end, bool whole) const {
     std::vector<std::uint64_t> seen((n_ + 63) / 64, 0);
     const std::uint32_t* order = p_.order.data();
     const auto n = static_cast<std::uint32_t>(n_);
     std::uint32_t out_of_range = 0;
-    for (std::size_t i = 0; i < n_; ++i) out_of_range |= static_cast<std::uint32_t>(order[i] >= n);
+    for (std::size_t i = begin; i < end; ++i) out_of_range |= static_cast<std::uint32_t>(order[i] >= n);
     if (out_of_range == 0) {
       auto set = [&seen](std::uint32_t v) { seen[v >> 6] |= std::uint64_t{1} << (v & 63); };
-      std::size_t i = 0;
-      for (; i + 4 <= n_; i += 4) {  // four independent updates a step: a third faster than one
+      std::size_t i = begin;
+      for (; i + 4 <= end; i += 4) {  // four independent updates a step: a third faster than one
         set(order[i]);
         set(order[i + 1]);
         set(order[i + 2]);
         set(order[i + 3]);
       }
-      for (; i < n_; ++i) set(order[i]);
-      std::uint64_t missing = 0;
-      for (std::size_t w = 0; w + 1 < seen.size(); ++w) missing |= ~seen[w];
-      const std::size_t tail = n_ % 64;
-      missing |= ~seen.back() & (tail ? (std::uint64_t{1} << tail) - 1 : ~std::uint64_t{0});
-      if (missing == 0) return;
+      for (; i < end; ++i) set(order[i]);
+      if (!whole || all_seen(seen)) return seen;
       std::fill(seen.begin(), seen.end(), 0);
+    } else if (!whole) {
+      fail("the order holds an index out of range");
     }
     for (std::size_t i = 0; i < n_; ++i) {
       const std::uint32_t v = order[i];
@@ -151,43 +288,45 @@ class TreeChecker {
              (v >= n_ ? " (out of range)" : " (given twice)"));
       seen[v >> 6] |= bit;
     }
+    return seen;
   }
 
-  void visit(std::size_t depth) {
-    const std::size_t id = next_node_++;
+  void visit(Walk& walk, std::size_t depth) {
+    const std::size_t id = walk.next_node++;
     if (id >= p_.nodes.size()) fail("a right child lies past the last node");
     if (depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
     const PointNode<T>& node = p_.nodes[id];
-    if (node.is_leaf()) return visit_leaf(id, node, depth);
+    if (node.is_leaf()) return visit_leaf(walk, id, node, depth);
     const std::size_t axis = node.axis();
     if (axis >= dim_) fail_node(id, "split axis " + std::to_string(axis) + " is not below the dimension");
     if (std::isnan(node.left_max) || std::isnan(node.right_min) || node.left_max > node.right_min)
       fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) +
                         ", right_min " + std::to_string(node.right_min) + ")");
-    const T saved_hi = hi_[axis], saved_lo = lo_[axis];
-    hi_[axis] = std::min(hi_[axis], node.left_max);
-    visit(depth + 1);
-    hi_[axis] = saved_hi;
-    if (node.right_child() != next_node_)
+    const T saved_hi = walk.hi[axis], saved_lo = walk.lo[axis];
+    walk.hi[axis] = std::min(walk.hi[axis], node.left_max);
+    visit(walk, depth + 1);
+    walk.hi[axis] = saved_hi;
+    if (node.right_child() != walk.next_node)
       fail_node(id, "right child " + std::to_string(node.right_child()) + ", expected " +
-                        std::to_string(next_node_));
-    lo_[axis] = std::max(lo_[axis], node.right_min);
-    visit(depth + 1);
-    lo_[axis] = saved_lo;
+                        std::to_string(walk.next_node));
+    walk.lo[axis] = std::max(walk.lo[axis], node.right_min);
+    visit(walk, depth + 1);
+    walk.lo[axis] = saved_lo;
   }
 
-  void visit_leaf(std::size_t id, const PointNode<T>& leaf, std::size_t depth) {
+  void visit_leaf(Walk& walk, std::size_t id, const PointNode<T>& leaf, std::size_t depth) {
     const std::size_t first = leaf.first(), count = leaf.count();
-    if (first != next_point_ || count > n_ - first)
+    if (first != walk.next_point || count > n_ - first)
       fail_node(id, "leaf holds points [" + std::to_string(first) + ", " + std::to_string(first + count) +
-                        "), expected them to start at " + std::to_string(next_point_) + " and end by " +
+                        "), expected them to start at " + std::to_string(walk.next_point) + " and end by " +
                         std::to_string(n_));
-    next_point_ += count;
-    shape_.depth = std::max(shape_.depth, depth);
-    ++shape_.leaves;
+    walk.next_point += count;
+    walk.shape.depth = std::max(walk.shape.depth, depth);
+    ++walk.shape.leaves;
+    if (walk.companion) walk.companion->rows(walk.id, first + count);
     const T* rows = p_.points.data() + first * dim_;
-    const T* lo = lo_.data();
-    const T* hi = hi_.data();
+    const T* lo = walk.lo.data();
+    const T* hi = walk.hi.data();
     // Every coordinate within the root cell and the splits above (finite bounds: no NaN or
     // infinity passes).
     bool inside;
@@ -245,9 +384,6 @@ class TreeChecker {
 
   const PointTreeParts<T>& p_;
   std::size_t n_, dim_;
-  std::vector<T> lo_, hi_;  // the root cell cut by the splits above the node being visited
-  std::size_t next_node_ = 0, next_point_ = 0;
-  TreeShape shape_;
 };
 
 /// Checks parts from outside (see the top of this file); throws Error("point tree: node 12: ...").
