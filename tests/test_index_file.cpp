@@ -79,7 +79,8 @@ struct SmallIndex {
 
 }  // namespace
 
-TEST_CASE("index: CRC-32C has the standard check value, in hardware and in software", "[index]") {
+TEST_CASE("index: CRC-32C has the standard check value, in hardware (crc32, or folding) and in software",
+          "[index]") {
   const char* check = "123456789";
   CHECK(io::detail::crc32c(check, 9) == 0xE3069283u);
   CHECK(io::detail::crc32c_portable(check, 9) == 0xE3069283u);
@@ -87,8 +88,9 @@ TEST_CASE("index: CRC-32C has the standard check value, in hardware and in softw
   std::mt19937 rng(3);
   std::vector<unsigned char> data(100000);
   for (auto& b : data) b = static_cast<unsigned char>(rng());
-  // Lengths around the three-stream blocks (3 x 4096) and their tails, at odd starts.
-  for (std::size_t n : {1, 7, 8, 9, 4095, 12287, 12288, 12289, 24583, 99990})
+  // Lengths around the three-stream blocks (3 x 4096) and their tails, and around the folding's
+  // threshold (1024 bytes) and rounds (256 bytes), at odd starts.
+  for (std::size_t n : {1, 7, 8, 9, 1023, 1024, 1025, 1279, 1280, 1281, 4095, 12287, 12288, 12289, 24583, 99990})
     for (std::size_t start : {0, 1, 5}) {
       CAPTURE(n, start);
       REQUIRE(io::detail::crc32c(data.data() + start, n) ==

