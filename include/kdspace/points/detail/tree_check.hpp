@@ -356,23 +356,25 @@ class TreeChecker {
 #if defined(__SSE2__)
     // 3-D float points four at a time: their 12 floats are three 4-float loads, each checked against
     // the bounds in the order its lanes hold the axes (x y z x, y z x y, z x y z): half the
-    // instructions of a load a point. Then a point a load (its x, y, z and the next point's x), and
-    // the leaf's last point in the scalar loop (a 4-float load at it would reach past the leaf).
+    // instructions of a load a point. A leaf of 4k + r points ends with the four points that end it,
+    // whatever r (r of them checked a second time), so no loop runs on the last few; a leaf of fewer
+    // than four points goes through the scalar loop.
     if constexpr (D == 3 && std::is_same_v<T, float>) {
-      const __m128 lo0 = _mm_setr_ps(lo[0], lo[1], lo[2], lo[0]), hi0 = _mm_setr_ps(hi[0], hi[1], hi[2], hi[0]);
-      const __m128 lo1 = _mm_setr_ps(lo[1], lo[2], lo[0], lo[1]), hi1 = _mm_setr_ps(hi[1], hi[2], hi[0], hi[1]);
-      const __m128 lo2 = _mm_setr_ps(lo[2], lo[0], lo[1], lo[2]), hi2 = _mm_setr_ps(hi[2], hi[0], hi[1], hi[2]);
-      const auto within = [](__m128 low, __m128 p, __m128 high) {
-        return _mm_and_ps(_mm_cmple_ps(low, p), _mm_cmple_ps(p, high));
-      };
-      __m128 ok = _mm_castsi128_ps(_mm_set1_epi32(-1));
-      for (; count >= 4; count -= 4, rows += 12) {
-        ok = _mm_and_ps(ok, within(lo0, _mm_loadu_ps(rows), hi0));
-        ok = _mm_and_ps(ok, within(lo1, _mm_loadu_ps(rows + 4), hi1));
-        ok = _mm_and_ps(ok, within(lo2, _mm_loadu_ps(rows + 8), hi2));
+      if (count >= 4) {
+        const __m128 lo0 = _mm_setr_ps(lo[0], lo[1], lo[2], lo[0]), hi0 = _mm_setr_ps(hi[0], hi[1], hi[2], hi[0]);
+        const __m128 lo1 = _mm_setr_ps(lo[1], lo[2], lo[0], lo[1]), hi1 = _mm_setr_ps(hi[1], hi[2], hi[0], hi[1]);
+        const __m128 lo2 = _mm_setr_ps(lo[2], lo[0], lo[1], lo[2]), hi2 = _mm_setr_ps(hi[2], hi[0], hi[1], hi[2]);
+        const auto within = [](__m128 low, __m128 p, __m128 high) {
+          return _mm_and_ps(_mm_cmple_ps(low, p), _mm_cmple_ps(p, high));
+        };
+        const auto four_points = [&](const float* p) {
+          return _mm_and_ps(_mm_and_ps(within(lo0, _mm_loadu_ps(p), hi0), within(lo1, _mm_loadu_ps(p + 4), hi1)),
+                            within(lo2, _mm_loadu_ps(p + 8), hi2));
+        };
+        __m128 ok = four_points(rows + 3 * (count - 4));
+        for (std::size_t i = 0; i + 4 <= count; i += 4) ok = _mm_and_ps(ok, four_points(rows + 3 * i));
+        return _mm_movemask_ps(ok) == 15;
       }
-      for (; count > 1; --count, rows += 3) ok = _mm_and_ps(ok, within(lo0, _mm_loadu_ps(rows), hi0));
-      if (_mm_movemask_ps(ok) != 15) return false;
     }
 #endif
     const std::size_t d = D ? D : dim_;
