@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -18,9 +19,9 @@
 #include <vector>
 
 #include "../lib/io/crc32c.hpp"
+#include "catch_support.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/io/index.hpp"
-#include "catch_support.hpp"
 #include "support.hpp"
 
 namespace fs = std::filesystem;
@@ -90,7 +91,8 @@ TEST_CASE("index: CRC-32C has the standard check value, in hardware (crc32, or f
   for (auto& b : data) b = static_cast<unsigned char>(rng());
   // Lengths around the three-stream blocks (3 x 4096) and their tails, and around the folding's
   // threshold (1024 bytes) and rounds (256 bytes), at odd starts.
-  for (std::size_t n : {1, 7, 8, 9, 1023, 1024, 1025, 1279, 1280, 1281, 4095, 12287, 12288, 12289, 24583, 99990})
+  for (std::size_t n :
+       {1, 7, 8, 9, 1023, 1024, 1025, 1279, 1280, 1281, 4095, 12287, 12288, 12289, 24583, 99990})
     for (std::size_t start : {0, 1, 5}) {
       CAPTURE(n, start);
       REQUIRE(io::detail::crc32c(data.data() + start, n) ==
@@ -393,6 +395,57 @@ TEST_CASE("index: a point order that is no permutation is named, in a tree check
   CHECK(with_order(later, value_at(5)) == path + ": point tree: index " + std::to_string(later) +
                                               " of the point order is " + std::to_string(value_at(5)) +
                                               " (given twice)");
+}
+
+TEST_CASE(
+    "index: a large tree, checked in two walks, names a point out of its cell on either side of the split",
+    "[index][errors]") {
+  // With every checksum resealed, a point moved out of the root cell must be found by whichever walk
+  // reads it (the first points, those around the middle where the second walk starts, the last),
+  // and named as the one-thread check names it: its leaf. A broken link of the root (on the path the
+  // two walks split along) is named too.
+  const std::size_t n = std::size_t{3} << 16;
+  REQUIRE(n >= kdspace::detail::parallel_tree_check);
+  const auto points = kdspace_test::make_points<float>(Shape::uniform, n, 3, 10);
+  const PointTree<float> tree(points.data(), n, 3);
+  TempDir tmp;
+  const std::string path = tmp.file("walks.kdx");
+  io::save(path, tree);
+  const std::vector<unsigned char> bytes = file_bytes(path);
+  const auto file = io::IndexFile::open(path);
+  const io::SectionEntry nodes = *file->find(io::SectionType::nodes);
+  const io::SectionEntry rows = *file->find(io::SectionType::points);
+  using Node = kdspace::detail::PointNode<float>;
+  std::vector<Node> node_array(nodes.length / sizeof(Node));
+  std::memcpy(node_array.data(), bytes.data() + nodes.offset, nodes.length);
+  auto leaf_of = [&](std::size_t row) {
+    for (std::size_t id = 0; id < node_array.size(); ++id)
+      if (node_array[id].is_leaf() && node_array[id].first() <= row &&
+          row < node_array[id].first() + node_array[id].count())
+        return id;
+    return node_array.size();
+  };
+  auto load_changed = [&](std::vector<unsigned char> changed) {
+    io::reseal_index_bytes(changed);
+    write_bytes(path, changed);
+    return error_message([&] { io::load_point_tree<float>(path); });
+  };
+  for (std::size_t row : {std::size_t{0}, n / 2 - 1, n / 2, n / 2 + 1, n - 1}) {
+    CAPTURE(row);
+    std::vector<unsigned char> changed = bytes;
+    const float far = 1e30f;
+    std::memcpy(changed.data() + rows.offset + 12 * row + 4, &far, 4);  // its y
+    CHECK(load_changed(changed) ==
+          path + ": point tree: node " + std::to_string(leaf_of(row)) +
+              ": a point lies outside the bounds and splits above its leaf, or is not finite");
+  }
+  std::vector<unsigned char> changed = bytes;
+  const std::uint32_t link = node_array[0].right_child() + 1;
+  std::memcpy(changed.data() + nodes.offset + offsetof(Node, link), &link, 4);
+  CHECK(load_changed(changed).rfind(path + ": point tree: node 0: right child " + std::to_string(link), 0) ==
+        0);
+  write_bytes(path, bytes);
+  require_same_nodes(io::load_point_tree<float>(path), tree);
 }
 
 TEST_CASE("index: a full disk mid-save leaves the old file intact, and no temporary file",

@@ -167,13 +167,13 @@ __attribute__((target("avx512f"))) __m512i wide(FoldConstants k) {
 // Bytes at which folding pays (below, the three-stream loop is as fast).
 constexpr std::size_t fold_min_bytes = 1024;
 
-__attribute__((target("avx512f,vpclmulqdq,pclmul,sse4.2"))) std::uint32_t update_folding(std::uint32_t c,
-                                                                                       const unsigned char* p,
-                                                                                       std::size_t n) {
-  static const FoldConstants by256 = fold_by(256), by192 = fold_by(192), by128 = fold_by(128), by64 = fold_by(64),
-                             by48 = fold_by(48), by32 = fold_by(32), by16 = fold_by(16);
+__attribute__((target("avx512f,vpclmulqdq,pclmul,sse4.2"))) std::uint32_t update_folding(
+    std::uint32_t c, const unsigned char* p, std::size_t n) {
+  static const FoldConstants by256 = fold_by(256), by192 = fold_by(192), by128 = fold_by(128),
+                             by64 = fold_by(64), by48 = fold_by(48), by32 = fold_by(32), by16 = fold_by(16);
   // The register enters as the first four bytes' xor (update(c, M) = update(0, M ^ c)).
-  __m512i x0 = _mm512_xor_si512(_mm512_loadu_si512(p), _mm512_castsi128_si512(_mm_cvtsi32_si128(static_cast<int>(c))));
+  __m512i x0 =
+      _mm512_xor_si512(_mm512_loadu_si512(p), _mm512_castsi128_si512(_mm_cvtsi32_si128(static_cast<int>(c))));
   __m512i x1 = _mm512_loadu_si512(p + 64), x2 = _mm512_loadu_si512(p + 128), x3 = _mm512_loadu_si512(p + 192);
   p += 256;
   n -= 256;
@@ -188,8 +188,11 @@ __attribute__((target("avx512f,vpclmulqdq,pclmul,sse4.2"))) std::uint32_t update
   __m512i x = fold(x0, wide(by192), fold(x1, wide(by128), fold(x2, wide(by64), x3)));
   alignas(64) std::uint64_t words[8];
   _mm512_store_si512(words, x);
-  const auto lane_at = [&words](int i) { return _mm_load_si128(reinterpret_cast<const __m128i*>(words + 2 * i)); };
-  __m128i lane = fold(lane_at(0), narrow(by48), fold(lane_at(1), narrow(by32), fold(lane_at(2), narrow(by16), lane_at(3))));
+  const auto lane_at = [&words](int i) {
+    return _mm_load_si128(reinterpret_cast<const __m128i*>(words + 2 * i));
+  };
+  __m128i lane = fold(lane_at(0), narrow(by48),
+                      fold(lane_at(1), narrow(by32), fold(lane_at(2), narrow(by16), lane_at(3))));
   // The lane's 16 bytes stand for everything so far: run the register over them from 0, then the rest.
   std::uint64_t r = _mm_crc32_u64(0, static_cast<std::uint64_t>(_mm_cvtsi128_si64(lane)));
   r = _mm_crc32_u64(r, static_cast<std::uint64_t>(_mm_extract_epi64(lane, 1)));

@@ -29,9 +29,9 @@
 #include "kdspace/error.hpp"
 #include "kdspace/io/index_file.hpp"
 #include "kdspace/metric.hpp"
+#include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/dynamic_point_tree.hpp"
 #include "kdspace/points/point_forest.hpp"
-#include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/point_tree.hpp"
 
 namespace kdspace::io {

@@ -219,7 +219,8 @@ class TreeChecker {
     // The pieces in node order, each starting where the one before ends: the path's nodes, then walk
     // 0's subtrees and walk 1's in the order the path met them.
     std::size_t expected = 0, path_at = 0, at[2] = {0, 0};
-    while (expected < nodes && (path_at < path.size() || at[0] < subtrees[0].size() || at[1] < subtrees[1].size())) {
+    while (expected < nodes &&
+           (path_at < path.size() || at[0] < subtrees[0].size() || at[1] < subtrees[1].size())) {
       if (path_at < path.size() && path[path_at] == expected) {
         ++expected;
         ++path_at;
@@ -361,15 +362,19 @@ class TreeChecker {
     // than four points goes through the scalar loop.
     if constexpr (D == 3 && std::is_same_v<T, float>) {
       if (count >= 4) {
-        const __m128 lo0 = _mm_setr_ps(lo[0], lo[1], lo[2], lo[0]), hi0 = _mm_setr_ps(hi[0], hi[1], hi[2], hi[0]);
-        const __m128 lo1 = _mm_setr_ps(lo[1], lo[2], lo[0], lo[1]), hi1 = _mm_setr_ps(hi[1], hi[2], hi[0], hi[1]);
-        const __m128 lo2 = _mm_setr_ps(lo[2], lo[0], lo[1], lo[2]), hi2 = _mm_setr_ps(hi[2], hi[0], hi[1], hi[2]);
+        const __m128 lo0 = _mm_setr_ps(lo[0], lo[1], lo[2], lo[0]),
+                     hi0 = _mm_setr_ps(hi[0], hi[1], hi[2], hi[0]);
+        const __m128 lo1 = _mm_setr_ps(lo[1], lo[2], lo[0], lo[1]),
+                     hi1 = _mm_setr_ps(hi[1], hi[2], hi[0], hi[1]);
+        const __m128 lo2 = _mm_setr_ps(lo[2], lo[0], lo[1], lo[2]),
+                     hi2 = _mm_setr_ps(hi[2], hi[0], hi[1], hi[2]);
         const auto within = [](__m128 low, __m128 p, __m128 high) {
           return _mm_and_ps(_mm_cmple_ps(low, p), _mm_cmple_ps(p, high));
         };
         const auto four_points = [&](const float* p) {
-          return _mm_and_ps(_mm_and_ps(within(lo0, _mm_loadu_ps(p), hi0), within(lo1, _mm_loadu_ps(p + 4), hi1)),
-                            within(lo2, _mm_loadu_ps(p + 8), hi2));
+          return _mm_and_ps(
+              _mm_and_ps(within(lo0, _mm_loadu_ps(p), hi0), within(lo1, _mm_loadu_ps(p + 4), hi1)),
+              within(lo2, _mm_loadu_ps(p + 8), hi2));
         };
         __m128 ok = four_points(rows + 3 * (count - 4));
         for (std::size_t i = 0; i + 4 <= count; i += 4) ok = _mm_and_ps(ok, four_points(rows + 3 * i));
