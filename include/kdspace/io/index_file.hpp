@@ -38,7 +38,9 @@
 // kind then check the sections they need and the structure they hold (tree links in range, leaf
 // ranges in range, no cycles, and for point trees every point inside the splits above it) before a
 // query can run, while a second thread checks the sections' checksums in chunks that the first shares
-// once done (structural checks are safe on any bytes); both pass, or no index. Every problem throws
+// once done (structural checks are safe on any bytes); both pass, or no index. A large point tree's
+// check walks two halves of the tree on two threads, which checksum the points just before they
+// check them (each byte read from memory once) and then share the other sections' chunks. Every problem throws
 // kdspace::Error naming the file and what is wrong; nothing is allocated for what a header claims
 // (every length is checked against the file's size first).
 //
