@@ -1,7 +1,7 @@
 // CRC-32C in software (eight lookup tables, eight bytes a step), with SSE4.2's crc32 instruction
 // (three independent streams, combined by polynomial arithmetic, to hide the instruction's latency),
 // and, on processors with AVX-512 and VPCLMULQDQ, by folding 256 bytes a round with carry-less
-// multiplications (about three times the crc32 loop's speed on 16 MB: 0.33-0.43 ms against 1.15 ms).
+// multiplications (16 MB in 0.33-0.65 ms against the crc32 loop's 1.15 ms, one thread, busy machine).
 //
 // Notation: the CRC register is kept reflected (bit 31 holds the coefficient of x^0, bit 0 that of
 // x^31), as the crc32 instruction keeps it. update(c, bytes) runs the register over the bytes with
