@@ -399,7 +399,7 @@ TEST_CASE("index: a point order that is no permutation is named, in a tree check
 
 TEST_CASE(
     "index: a large tree, checked in two walks, names a point out of its cell on either side of the split",
-    "[index][errors]") {
+    "[index][errors][threads]") {
   // With every checksum resealed, a point moved out of the root cell must be found by whichever walk
   // reads it (the first points, those around the middle where the second walk starts, the last),
   // and named as the one-thread check names it: its leaf. A broken link of the root (on the path the
