@@ -14,7 +14,8 @@
 // exact answers), and batched exact 10-NN on 1 and 2 threads. Repetitions are interleaved across
 // libraries (repetition loop outside, libraries inside) so that a drift in machine speed hits all
 // alike; within a repetition an operation repeats until it has run --min-time seconds (the small real
-// sets answer all their queries in a millisecond), and the median over repetitions is reported. Every
+// sets answer all their queries in a millisecond), each pass answering the queries in a new seeded
+// order (PassOrders), and the median over repetitions is reported. Every
 // exact answer is cross-checked (10-NN and 1-NN distances at every rank within 1e-5 relative; radius
 // counts equal; box counts and index lists equal) and kdspace's own 10-NN answers are checked against
 // brute force on a sample; any disagreement makes the exit status 1 (FAISS's flat index is not exact
@@ -110,14 +111,15 @@ double dbl(std::size_t x) { return static_cast<double>(x); }
 // millisecond, too short for one reading of the clock. --min-time sets it.
 double g_min_seconds = 0.1;
 
-// Calls `pass` (one pass of an operation: its seconds, or a negative number when the library has
-// no such operation) until the passes add up to g_min_seconds; returns the mean seconds of a pass.
+// Calls `pass` (one pass of an operation, given its number 0, 1, ...: its seconds, or a negative
+// number when the library has no such operation) until the passes add up to g_min_seconds; returns
+// the mean seconds of a pass.
 template <class Pass>
 double timed(Pass&& pass) {
   double total = 0;
   std::size_t passes = 0;
   do {
-    const double s = pass();
+    const double s = pass(passes);
     if (s < 0) return s;
     total += s;
     ++passes;
@@ -762,9 +764,69 @@ void record(Library& lib, Op op, double s, std::size_t nq) {
 
 void note_disagreements(Library& lib, Op op, std::size_t bad) { lib.disagreements[op] = std::max(lib.disagreements[op], bad); }
 
-void run_library(const Problem& p, Library& lib, References& refs, bool first_rep) {
+/// The order in which a pass answers the queries. A small query set answered in one order pass after
+/// pass lets the branch predictor learn that sequence (kitten: 521 queries, some 2,000 passes a
+/// measurement), which no user's queries would offer; so each pass of a query measurement answers
+/// the same queries in a new order, drawn from a seed that depends only on (repetition, operation,
+/// pass), hence the same sequence of orders for every library. The shuffling happens between passes,
+/// off the clock; the answers of the last pass are put back in the problem's order for the checks.
+/// (Box queries keep the problem's order: the plain scan's reference lists are of the first boxes.)
+class PassOrders {
+ public:
+  explicit PassOrders(Problem& problem) : p_(problem), given_(problem.queries), rows_(problem.nq) {}
+  ~PassOrders() { p_.queries = given_; }
+
+  /// Puts p.queries in the order of pass `pass` of measurement `measurement`: row i is query rows_[i].
+  void shuffle(std::uint64_t measurement, std::size_t pass) {
+    for (std::size_t i = 0; i < rows_.size(); ++i) rows_[i] = static_cast<std::uint32_t>(i);
+    std::mt19937_64 rng(measurement * 0x9E3779B97F4A7C15ull + pass);
+    std::shuffle(rows_.begin(), rows_.end(), rng);
+    const std::size_t d = p_.dim;
+    for (std::size_t i = 0; i < rows_.size(); ++i)
+      std::copy_n(given_.data() + rows_[i] * d, d, p_.queries.data() + i * d);
+  }
+
+  /// The last pass's answers (row i answers query rows_[i]) in the problem's order, and p.queries too.
+  void put_back(KnnAnswers& answers) {
+    const KnnAnswers shuffled = answers;
+    const std::size_t k = answers.k;
+    for (std::size_t i = 0; i < rows_.size(); ++i) {
+      std::copy_n(shuffled.ids.data() + i * k, k, answers.ids.data() + rows_[i] * k);
+      std::copy_n(shuffled.dists.data() + i * k, k, answers.dists.data() + rows_[i] * k);
+    }
+    p_.queries = given_;
+  }
+  void put_back(std::vector<std::uint32_t>& counts) {
+    const std::vector<std::uint32_t> shuffled = counts;
+    for (std::size_t i = 0; i < rows_.size(); ++i) counts[rows_[i]] = shuffled[i];
+    p_.queries = given_;
+  }
+
+  /// Seconds of a pass of `pass` (which answers p.queries), each pass in a new order; then the last
+  /// pass's answers put back in the problem's order.
+  template <class Pass, class Answers>
+  double timed_shuffled(std::uint64_t measurement, Answers& answers, Pass&& pass) {
+    const double s = timed([&](std::size_t number) {
+      shuffle(measurement, number);
+      return pass();
+    });
+    if (s >= 0) put_back(answers);
+    else p_.queries = given_;
+    return s;
+  }
+
+ private:
+  Problem& p_;
+  const std::vector<float> given_;
+  std::vector<std::uint32_t> rows_;
+};
+
+void run_library(const Problem& p, Library& lib, References& refs, PassOrders& orders, std::size_t rep) {
+  const bool first_rep = rep == 0;
+  // Each query measurement's number, for its orders: the same for every library.
+  auto measurement = [&](Op op) { return static_cast<std::uint64_t>(rep * kOps + static_cast<std::size_t>(op)); };
   std::fprintf(stderr, "  %s\n", lib.label.c_str());
-  if (const double s = timed([&] { return lib.build(); }); s >= 0) {  // the plain scan has no index
+  if (const double s = timed([&](std::size_t) { return lib.build(); }); s >= 0) {  // the plain scan has no index
     record(lib, kBuild, s, p.n);
     const double bytes = lib.index_bytes();
     lib.bytes_per_point = bytes < 0 ? -1 : bytes / dbl(p.n);
@@ -773,7 +835,7 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
   const std::size_t ks[2] = {1, 10};
   for (int i = 0; i < 2; ++i) {
     const Op op = i == 0 ? kKnn1 : kKnn10;
-    const double s = timed([&] { return lib.knn(ks[i], 0.0, answers); });
+    const double s = orders.timed_shuffled(measurement(op), answers, [&] { return lib.knn(ks[i], 0.0, answers); });
     if (s < 0) continue;
     record(lib, op, s, p.nq);
     if (!refs.knn[i]) refs.knn[i] = answers;
@@ -783,7 +845,7 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
     check_against_brute_force(p, *refs.knn[1], *refs.knn[0], refs);
   for (int i = 0; i < 2; ++i) {
     const Op op = i == 0 ? kKnn1Loop : kKnn10Loop;
-    const double s = timed([&] { return lib.knn_loop(ks[i], answers); });
+    const double s = orders.timed_shuffled(measurement(op), answers, [&] { return lib.knn_loop(ks[i], answers); });
     if (s < 0) continue;
     record(lib, op, s, p.nq);
     note_disagreements(lib, op, knn_disagreements(answers, *refs.knn[i]));
@@ -791,7 +853,7 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
   std::vector<std::uint32_t> counts;
   for (int i = 0; i < 2; ++i) {
     const Op op = i == 0 ? kRadius10 : kRadius100;
-    const double s = timed([&] { return lib.radius(p.radius[i], counts); });
+    const double s = orders.timed_shuffled(measurement(op), counts, [&] { return lib.radius(p.radius[i], counts); });
     if (s < 0) continue;
     record(lib, op, s, p.nq);
     if (!refs.radius[i]) {
@@ -806,7 +868,7 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
     }
   }
   BoxAnswers boxes;
-  if (const double s = timed([&] { return lib.box(boxes); }); s >= 0) {
+  if (const double s = timed([&](std::size_t) { return lib.box(boxes); }); s >= 0) {
     record(lib, kBox, s, boxes.counts.size());
     if (!refs.box) {
       refs.box = boxes;
@@ -819,13 +881,16 @@ void run_library(const Problem& p, Library& lib, References& refs, bool first_re
   }
   for (int i = 0; i < 2; ++i) {
     const Op op = i == 0 ? kApprox05 : kApprox2;
-    const double s = timed([&] { return lib.knn(10, kApproxEps[i], answers); });
+    const double s =
+        orders.timed_shuffled(measurement(op), answers, [&] { return lib.knn(10, kApproxEps[i], answers); });
     if (s < 0) continue;
     record(lib, op, s, p.nq);
     lib.recall[i] = recall_at_10(answers, *refs.knn[1]);
   }
   if (g_cpu_clock) {  // CPU time adds up both threads: no 2-thread figure
-  } else if (const double s = timed([&] { return lib.knn_threads(10, 2, answers); }); s >= 0) {
+  } else if (const double s = orders.timed_shuffled(measurement(kBatch2), answers,
+                                                    [&] { return lib.knn_threads(10, 2, answers); });
+             s >= 0) {
     record(lib, kBatch2, s, p.nq);
     note_disagreements(lib, kBatch2, knn_disagreements(answers, *refs.knn[1]));
   }
@@ -1232,7 +1297,8 @@ int main(int argc, char** argv) {
               "%s KDTreeSingleIndex (leaf 10, reordered), nanoflann 0x%x KDTreeSingleIndexAdaptor (leaf 10)%s%s; "
               "compile-time dimension variants where the dimension is 3, 8 or 16. One thread unless a column says "
               "otherwise; q/s = queries per second; builds on one thread; each figure is the mean over as many "
-              "passes as take %.2f s (%s), median of the interleaved repetitions.\n",
+              "passes as take %.2f s (%s), each pass in a new order of the queries (the same orders for every "
+              "library), median of the interleaved repetitions.\n",
               KDSPACE_VERSION_MAJOR, KDSPACE_VERSION_MINOR, KDSPACE_VERSION_PATCH, FLANN_VERSION_, NANOFLANN_VERSION,
 #ifdef KDSPACE_BENCH_CGAL
               ", CGAL " CGAL_VERSION_STR " Kd_tree (3-D only; sliding midpoint, bucket 10)",
@@ -1286,9 +1352,12 @@ int main(int argc, char** argv) {
 #endif
     libs.push_back(std::make_unique<ScanLibrary>(p));
     References refs;
-    for (std::size_t rep = 0; rep < reps; ++rep) {  // repetitions outside, libraries inside
-      std::fprintf(stderr, "%s: repetition %zu of %zu\n", p.name.c_str(), rep + 1, reps);
-      for (auto& lib : libs) run_library(p, *lib, refs, rep == 0);
+    {
+      PassOrders orders(p);
+      for (std::size_t rep = 0; rep < reps; ++rep) {  // repetitions outside, libraries inside
+        std::fprintf(stderr, "%s: repetition %zu of %zu\n", p.name.c_str(), rep + 1, reps);
+        for (auto& lib : libs) run_library(p, *lib, refs, orders, rep);
+      }
     }
     print_table(p, libs, refs, reps);
     print_json(p, libs, refs, reps);

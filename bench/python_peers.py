@@ -9,9 +9,10 @@ interpreter (/usr/bin/python3, which sees python3-pykdtree and python3-scipy):
 DIR holds base.npy and queries.npy (float32, one point a row) and exact1.npy / exact10.npy, kdspace's
 exact 1-NN and 10-NN distances. Both trees are built with their default parameters (leaf size 16) on
 the float32 points (cKDTree converts them to float64 itself, inside its build); each measurement
-repeats until it has run S seconds and the median over R interleaved repetitions is kept. Every
-answer is checked against the exact distances (within 1e-5 relative). Prints a markdown side table,
-kdspace's figures (passed in) against each peer's, and one JSON line per measurement.
+repeats until it has run S seconds (each query run answering the queries in a new order) and the
+median over R interleaved repetitions is kept. Every answer is checked against the exact distances
+(within 1e-5 relative). Prints a markdown side table, kdspace's figures (passed in) against each
+peer's, and one JSON line per measurement.
 """
 import argparse
 import importlib.metadata
@@ -41,6 +42,24 @@ def timed(run, min_seconds):
         runs += 1
         if total >= min_seconds:
             return total / runs, result
+
+
+def timed_shuffled(query, queries, min_seconds, seed):
+    """As timed(query(queries)), but each run answers the queries in a new order (drawn from seed and
+    the run's number, off the clock), as kdspace-bench does, so that no run is measured on a sequence
+    the branch predictor has learnt; the last run's answers are returned in the given order."""
+    total, runs = 0.0, 0
+    while True:
+        rows = np.random.default_rng([seed, runs]).permutation(queries.shape[0])
+        shuffled = np.ascontiguousarray(queries[rows])
+        start = CLOCK()
+        result = query(shuffled)
+        total += CLOCK() - start
+        runs += 1
+        if total >= min_seconds:
+            answers = np.empty_like(result)
+            answers[rows] = result
+            return total / runs, answers
 
 
 def disagreements(dist, exact):
@@ -95,12 +114,12 @@ def main():
     libraries = [PyKdTree(), ScipyTree()]
     seconds = {(lib.key, op): [] for lib in libraries for op in ("build", 1, 10)}
     bad = {lib.key: 0 for lib in libraries}
-    for _ in range(args.reps):  # repetitions outside, libraries inside
+    for rep in range(args.reps):  # repetitions outside, libraries inside
         for lib in libraries:
             s, tree = timed(lambda: lib.build(base), args.min_time)
             seconds[(lib.key, "build")].append(s)
             for k in (1, 10):
-                s, dist = timed(lambda: lib.query(tree, queries, k), args.min_time)
+                s, dist = timed_shuffled(lambda q: lib.query(tree, q, k), queries, args.min_time, rep * 100 + k)
                 seconds[(lib.key, k)].append(s)
                 bad[lib.key] = max(bad[lib.key], disagreements(dist, exact[k]))
 
