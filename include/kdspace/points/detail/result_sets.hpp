@@ -5,7 +5,13 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
+#include <type_traits>
 #include <vector>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace kdspace::detail {
 
@@ -117,10 +123,116 @@ class SortedKnnResults {
   std::vector<Candidate<T>>& kept_;
 };
 
-/// Calls f(results) with the k-NN result set that suits k: SortedKnnResults up to its small_k, else
-/// KnnResults. Both keep the same candidates.
+#if defined(__SSE2__)
+/// SortedKnnResults for float with SSE2, for k from min_k to max_k: the same candidates, kept in the
+/// same order, inserted without a data-dependent branch. The scalar insertion compares the newcomer
+/// with the kept ones one at a time until it finds its place, and the exit of that loop is a branch
+/// no predictor can learn (the place is random): about 25 of the 60 mispredicted branches of a 10-NN
+/// query on a 3-D scan (callgrind --branch-sim, building.ply). Here the distances and the indices sit
+/// in two arrays of 4-lane chunks; the newcomer's place is the count of kept entries that come before
+/// it (vector comparisons over every chunk, the tie rule included), and each chunk is rewritten in one
+/// pass as old lane, newcomer or the lane before, chosen by masks. The entries not yet filled hold
+/// (+inf, the largest index), which nothing comes after, so they never count. Measured (one thread,
+/// held-out queries of real 3-D scans, 10-NN batches): 1.03-1.07x the queries a second on building
+/// and armadillo, 1.3x on kitten; below 5 neighbours the scalar loop is short and wins (1-NN: 0.7x),
+/// and beyond 16 the work on every chunk outweighs the mispredictions (32-NN: 0.8x).
+class ChunkedKnnResults {
+ public:
+  static constexpr std::size_t min_k = 5, max_k = 16;
+
+  ChunkedKnnResults(std::size_t k, float limit, std::vector<Candidate<float>>& storage)
+      : k_(k), chunks_((k + 3) / 4), limit_(limit), bound_(limit), out_(storage) {
+    const __m128 infinity = _mm_set1_ps(std::numeric_limits<float>::infinity());
+    const __m128i last_index = _mm_set1_epi32(biased(UINT32_MAX));
+    for (std::size_t c = 0; c < chunks_; ++c) {
+      _mm_store_ps(dist_ + 4 * c, infinity);
+      _mm_store_si128(reinterpret_cast<__m128i*>(index_ + 4 * c), last_index);
+      // Lanes at or beyond k take a shifted-out entry, never a place: masked out of the count.
+      const auto lane = [&](std::size_t j) { return 4 * c + j < k ? -1 : 0; };
+      valid_[c] = _mm_set_epi32(lane(3), lane(2), lane(1), lane(0));
+    }
+  }
+
+  float bound() const { return bound_; }
+  bool full() const { return size_ == k_; }
+
+  bool offer(float dist, std::uint32_t index) {
+    if (!(dist <= bound_)) return false;  // bound_ is limit_ until k are kept
+    const __m128 d = _mm_set1_ps(dist);
+    const __m128i i = _mm_set1_epi32(biased(index));
+    // place = #{kept entries before (dist, index)}: dist' < dist, or dist' == dist and index' < index.
+    __m128i count = _mm_setzero_si128();
+    for (std::size_t c = 0; c < chunks_; ++c) {
+      const __m128 kd = _mm_load_ps(dist_ + 4 * c);
+      const __m128i ki = _mm_load_si128(reinterpret_cast<const __m128i*>(index_ + 4 * c));
+      const __m128i before = _mm_or_si128(
+          _mm_castps_si128(_mm_cmplt_ps(kd, d)),
+          _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(kd, d)), _mm_cmplt_epi32(ki, i)));
+      count = _mm_sub_epi32(count, _mm_and_si128(before, valid_[c]));  // -(-1) per lane before
+    }
+    count = _mm_add_epi32(count, _mm_shuffle_epi32(count, _MM_SHUFFLE(1, 0, 3, 2)));
+    count = _mm_add_epi32(count, _mm_shuffle_epi32(count, _MM_SHUFFLE(2, 3, 0, 1)));
+    const int place = _mm_cvtsi128_si32(count);
+    if (place >= static_cast<int>(k_)) return false;  // a tie with the k-th, of a larger index
+    // Lane l becomes: itself if l < place, the newcomer if l == place, lane l - 1 if l > place.
+    const __m128i at = _mm_set1_epi32(place);
+    __m128i lanes = _mm_set_epi32(3, 2, 1, 0);
+    __m128i previous_d = _mm_setzero_si128(), previous_i = _mm_setzero_si128();  // lane 3 of the chunk before
+    for (std::size_t c = 0; c < chunks_; ++c) {
+      __m128i* dp = reinterpret_cast<__m128i*>(dist_ + 4 * c);
+      __m128i* ip = reinterpret_cast<__m128i*>(index_ + 4 * c);
+      const __m128i kd = _mm_load_si128(dp), ki = _mm_load_si128(ip);
+      const __m128i keep = _mm_cmplt_epi32(lanes, at), here = _mm_cmpeq_epi32(lanes, at);
+      const __m128i shifted_d = _mm_or_si128(_mm_slli_si128(kd, 4), previous_d);
+      const __m128i shifted_i = _mm_or_si128(_mm_slli_si128(ki, 4), previous_i);
+      _mm_store_si128(dp, select(keep, kd, select(here, _mm_castps_si128(d), shifted_d)));
+      _mm_store_si128(ip, select(keep, ki, select(here, i, shifted_i)));
+      previous_d = _mm_srli_si128(kd, 12);
+      previous_i = _mm_srli_si128(ki, 12);
+      lanes = _mm_add_epi32(lanes, _mm_set1_epi32(4));
+    }
+    if (size_ < k_) ++size_;
+    if (size_ == k_) bound_ = dist_[k_ - 1];
+    return true;
+  }
+
+  std::vector<Candidate<float>>& sorted() {
+    out_.resize(size_);
+    for (std::size_t j = 0; j < size_; ++j)
+      out_[j] = {dist_[j], static_cast<std::uint32_t>(index_[j]) ^ 0x80000000u};
+    return out_;
+  }
+
+ private:
+  // Indices compared as signed 32-bit integers (SSE2 has no unsigned comparison): biased by 2^31.
+  static std::int32_t biased(std::uint32_t index) { return static_cast<std::int32_t>(index ^ 0x80000000u); }
+  static __m128i select(__m128i mask, __m128i a, __m128i b) {
+    return _mm_or_si128(_mm_and_si128(mask, a), _mm_andnot_si128(mask, b));
+  }
+
+  std::size_t k_, chunks_;
+  float limit_;
+  float bound_;
+  std::size_t size_ = 0;
+  std::vector<Candidate<float>>& out_;
+  alignas(16) float dist_[max_k];
+  alignas(16) std::int32_t index_[max_k];
+  __m128i valid_[max_k / 4];
+};
+#endif
+
+/// Calls f(results) with the k-NN result set that suits k: ChunkedKnnResults for float where it
+/// applies, else SortedKnnResults up to its small_k, else KnnResults. All keep the same candidates.
 template <class T, class F>
 decltype(auto) with_knn_results(std::size_t k, T limit, std::vector<Candidate<T>>& storage, F&& f) {
+#if defined(__SSE2__)
+  if constexpr (std::is_same_v<T, float>) {
+    if (k >= ChunkedKnnResults::min_k && k <= ChunkedKnnResults::max_k) {
+      ChunkedKnnResults results(k, limit, storage);
+      return f(results);
+    }
+  }
+#endif
   if (k <= SortedKnnResults<T>::small_k) {
     SortedKnnResults<T> results(k, limit, storage);
     return f(results);

@@ -1,0 +1,102 @@
+// The k-NN result sets (detail/result_sets.hpp) keep the same candidates in the same order: the first
+// k in (distance, index) order among those within the limit. Each is checked against the heap
+// (KnnResults) offer by offer: the same answer to each offer, the same bound after it, the same list
+// at the end; on streams with many ties, infinite distances and a finite limit.
+#include <algorithm>
+#include <catch2/catch.hpp>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "kdspace/points/detail/result_sets.hpp"
+
+using kdspace::detail::Candidate;
+using kdspace::detail::KnnResults;
+
+namespace {
+
+/// Offers `stream` to `results` and to a heap of the same k and limit; the first difference, or "".
+template <class Results>
+std::string differs_from_heap(Results& results, std::size_t k, float limit,
+                              const std::vector<Candidate<float>>& stream) {
+  std::vector<Candidate<float>> heap_storage;
+  KnnResults<float> heap(k, limit, heap_storage);
+  for (std::size_t i = 0; i < stream.size(); ++i) {
+    const bool kept = results.offer(stream[i].dist, stream[i].index);
+    const bool heap_kept = heap.offer(stream[i].dist, stream[i].index);
+    if (kept != heap_kept || results.bound() != heap.bound() || results.full() != heap.full())
+      return "offer " + std::to_string(i) + " (" + std::to_string(stream[i].dist) + ", " +
+             std::to_string(stream[i].index) + "): kept " + std::to_string(kept) + " bound " +
+             std::to_string(results.bound()) + ", heap: kept " + std::to_string(heap_kept) + " bound " +
+             std::to_string(heap.bound());
+  }
+  const auto& got = results.sorted();
+  const auto& want = heap.sorted();
+  if (got.size() != want.size())
+    return "sizes " + std::to_string(got.size()) + " and " + std::to_string(want.size());
+  for (std::size_t j = 0; j < got.size(); ++j)
+    if (got[j].dist != want[j].dist || got[j].index != want[j].index)
+      return "rank " + std::to_string(j) + ": (" + std::to_string(got[j].dist) + ", " +
+             std::to_string(got[j].index) + ") where the heap has (" + std::to_string(want[j].dist) + ", " +
+             std::to_string(want[j].index) + ")";
+  return "";
+}
+
+/// `length` candidates with distinct indices in random order (some near 2^32) and distances drawn
+/// from `values` distinct values (few values: many ties), a share of them infinite.
+std::vector<Candidate<float>> make_stream(std::size_t length, int values, std::mt19937& rng) {
+  std::vector<std::uint32_t> indices(length);
+  std::iota(indices.begin(), indices.end(), 0u);
+  for (std::size_t i = 0; i < length; i += 7) indices[i] = UINT32_MAX - static_cast<std::uint32_t>(i);
+  std::shuffle(indices.begin(), indices.end(), rng);
+  std::uniform_int_distribution<int> value(0, values);
+  std::vector<Candidate<float>> stream(length);
+  for (std::size_t i = 0; i < length; ++i) {
+    const int v = value(rng);
+    stream[i] = {v == values ? std::numeric_limits<float>::infinity() : static_cast<float>(v) * 0.25f,
+                 indices[i]};
+  }
+  return stream;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "result sets: SortedKnnResults keeps the heap's candidates, offer by offer, ties and infinities included",
+    "[points][result_sets]") {
+  std::mt19937 rng(11);
+  for (std::size_t k = 1; k <= kdspace::detail::SortedKnnResults<float>::small_k; ++k)
+    for (int values : {1, 3, 20, 1000})
+      for (float limit : {std::numeric_limits<float>::infinity(), 2.0f})
+        for (std::size_t length : {std::size_t{0}, k - 1, k, 3 * k + 5}) {
+          const auto stream = make_stream(length, values, rng);
+          std::vector<Candidate<float>> storage;
+          kdspace::detail::SortedKnnResults<float> results(k, limit, storage);
+          INFO("k " << k << ", " << values << " values, limit " << limit << ", " << length << " offers");
+          CHECK(differs_from_heap(results, k, limit, stream) == "");
+        }
+}
+
+#if defined(__SSE2__)
+TEST_CASE(
+    "result sets: ChunkedKnnResults keeps the heap's candidates, offer by offer, ties and infinities "
+    "included",
+    "[points][result_sets]") {
+  using kdspace::detail::ChunkedKnnResults;
+  std::mt19937 rng(12);
+  for (std::size_t k = ChunkedKnnResults::min_k; k <= ChunkedKnnResults::max_k; ++k)
+    for (int values : {1, 3, 20, 1000})
+      for (float limit : {std::numeric_limits<float>::infinity(), 2.0f})
+        for (std::size_t length : {std::size_t{0}, k - 1, k, 3 * k + 5, 200 * k}) {
+          const auto stream = make_stream(length, values, rng);
+          std::vector<Candidate<float>> storage;
+          ChunkedKnnResults results(k, limit, storage);
+          INFO("k " << k << ", " << values << " values, limit " << limit << ", " << length << " offers");
+          CHECK(differs_from_heap(results, k, limit, stream) == "");
+        }
+}
+#endif
