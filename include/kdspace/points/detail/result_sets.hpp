@@ -127,21 +127,22 @@ class SortedKnnResults {
 /// SortedKnnResults for float with SSE2, for k from min_k to max_k: the same candidates, kept in the
 /// same order, inserted without a data-dependent branch. The scalar insertion compares the newcomer
 /// with the kept ones one at a time until it finds its place, and the exit of that loop is a branch
-/// no predictor can learn (the place is random): about 25 of the 60 mispredicted branches of a 10-NN
+/// no predictor can learn (the place is random): about 29 of the 60 mispredicted branches of a 10-NN
 /// query on a 3-D scan (callgrind --branch-sim, building.ply). Here the distances and the indices sit
 /// in two arrays of 4-lane chunks; the newcomer's place is the count of kept entries that come before
 /// it (vector comparisons over every chunk, the tie rule included), and each chunk is rewritten in one
 /// pass as old lane, newcomer or the lane before, chosen by masks. The entries not yet filled hold
 /// (+inf, the largest index), which nothing comes after, so they never count. Measured (one thread,
-/// held-out queries of real 3-D scans, 10-NN batches): 1.03-1.07x the queries a second on building
-/// and armadillo, 1.3x on kitten; below 5 neighbours the scalar loop is short and wins (1-NN: 0.7x),
-/// and beyond 16 the work on every chunk outweighs the mispredictions (32-NN: 0.8x).
+/// held-out queries of real 3-D scans, 10-NN batches, busy machine): 1.32x the queries a second on
+/// kitten, 1.04x on armadillo, no change beyond the noise on building and uniform 3-D; below 5
+/// neighbours the scalar loop is short and wins (1-NN: 0.71-0.88x), and beyond 16 the work on every
+/// chunk outweighs the mispredictions (32-NN: 0.80x). README, "Choosing the defaults", has the figures.
 class ChunkedKnnResults {
  public:
   static constexpr std::size_t min_k = 5, max_k = 16;
 
   ChunkedKnnResults(std::size_t k, float limit, std::vector<Candidate<float>>& storage)
-      : k_(k), chunks_((k + 3) / 4), limit_(limit), bound_(limit), out_(storage) {
+      : k_(k), chunks_((k + 3) / 4), bound_(limit), out_(storage) {
     const __m128 infinity = _mm_set1_ps(std::numeric_limits<float>::infinity());
     const __m128i last_index = _mm_set1_epi32(biased(UINT32_MAX));
     for (std::size_t c = 0; c < chunks_; ++c) {
@@ -211,8 +212,7 @@ class ChunkedKnnResults {
   }
 
   std::size_t k_, chunks_;
-  float limit_;
-  float bound_;
+  float bound_;  // the limit until k are kept, then the k-th distance
   std::size_t size_ = 0;
   std::vector<Candidate<float>>& out_;
   alignas(16) float dist_[max_k];
