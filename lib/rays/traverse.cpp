@@ -76,11 +76,29 @@ void check_ray(const Ray& ray) {
   if (!problem.empty()) throw Error("ray: " + problem);
 }
 
+/// Lanes of a leaf's next blocks whose box the ray may hit within [t_lo, t_hi] (block_candidates):
+/// one block (bits 0-3), or two (bits 0-7) when Wide. `remaining` (> 0) counts the leaf's boxes from
+/// `blocks` on; a leaf's last block, when it is alone, is tested twice and its second copy's lanes
+/// dropped, so no block past the leaf is read.
+template <class Real, bool Wide>
+inline unsigned leaf_step_candidates(const LeafBlock* blocks, std::uint32_t remaining,
+                                     const detail::TraversalRay<Real>& r, Real t_lo, Real t_hi) {
+#if defined(KDSPACE_RAYS_AVX2)
+  if constexpr (Wide) {
+    const std::uint32_t two = remaining > 4;
+    return detail::block_pair_candidates(blocks[0], blocks[two], r, t_lo, t_hi) &
+           (0x0fu | (0xf0u & (0u - two)));
+  }
+#endif
+  return detail::block_candidates<Real>(blocks[0], r, t_lo, t_hi);
+}
+
 }  // namespace
 
-template <class Real, bool AnyHit>
+template <class Real, bool AnyHit, bool Wide>
 Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) const {
   using detail::round_up;
+  constexpr std::uint32_t step_blocks = Wide ? 2 : 1;  // leaf blocks tested together
   ++stats.rays;
   Hit none;
   if (boxes_.empty()) return none;
@@ -115,18 +133,20 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
         stats.boxes_tested += count;
         const LeafBlock* blocks = blocks_.data() + node.first() / 4;
         const std::uint32_t* ids = references_.data() + node.first();
-        for (std::uint32_t done = 0; done < count; done += 4, ++blocks, ids += 4) {
+        for (std::uint32_t done = 0; done < count;
+             done += 4 * step_blocks, blocks += step_blocks, ids += 4 * step_blocks) {
           // The lanes past count repeat the leaf's last box (checked when a tree is loaded), so they
           // are not masked off: a repeated box gives the same hit, which changes nothing (equal t,
           // equal index), and the mask cost a branch at every block (3.5% of the instructions of a
           // random ray that hits).
-          unsigned lanes = detail::block_candidates<Real>(*blocks, r, t_low, best_bound);
+          unsigned lanes = leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best_bound);
           while (lanes != 0) {
             const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
             lanes &= lanes - 1;
             double t_near = t_min, t_far = best_t;
             if (!exact) exact.emplace(ray);
-            if (!clip_to_box(detail::box_in_lane(*blocks, lane), *exact, t_near, t_far)) continue;
+            if (!clip_to_box(detail::box_in_lane(blocks[lane / 4], lane % 4), *exact, t_near, t_far))
+              continue;
             const auto box = static_cast<std::int32_t>(ids[lane]);
             if constexpr (AnyHit) {
               return Hit{box, detail::to_float_t(t_near)};
@@ -174,10 +194,24 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
 
 template <bool AnyHit>
 Hit BoxTree::trace_any_precision(const Ray& ray, float t_min, float t_max, RayStats& stats) const {
-  if (float_range_ && detail::fits_float_traversal(ray, float_trace_limit))
+  if (float_range_ && detail::fits_float_traversal(ray, float_trace_limit)) {
+#if defined(KDSPACE_RAYS_AVX2)
+    if (detail::has_avx2()) return trace_wide<AnyHit>(ray, t_min, t_max, stats);
+#endif
     return trace<float, AnyHit>(ray, t_min, t_max, stats);
+  }
   return trace<double, AnyHit>(ray, t_min, t_max, stats);
 }
+
+#if defined(KDSPACE_RAYS_AVX2)
+// The float traversal compiled for AVX2, its leaves tested eight boxes at a time: `flatten` inlines
+// the traversal here, where the eight-box filter (an AVX2 function) can be inlined in turn.
+template <bool AnyHit>
+__attribute__((target("avx2"), flatten)) Hit BoxTree::trace_wide(const Ray& ray, float t_min, float t_max,
+                                                                 RayStats& stats) const {
+  return trace<float, AnyHit, true>(ray, t_min, t_max, stats);
+}
+#endif
 
 Hit BoxTree::closest_hit(const Ray& ray, float t_min, float t_max, RayStats* stats) const {
   check_ray(ray);

@@ -294,8 +294,11 @@ class BoxTree {
   }
 
  private:
-  template <class Real, bool AnyHit>
+  template <class Real, bool AnyHit, bool Wide = false>
   Hit trace(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
+  /// trace<float, AnyHit> with eight-box leaf tests, for processors with AVX2.
+  template <bool AnyHit>
+  Hit trace_wide(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
   template <bool AnyHit>
   Hit trace_any_precision(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
   template <bool AnyHit>
