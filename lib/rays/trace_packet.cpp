@@ -71,8 +71,13 @@ bool BoxTree::packet_fits(const Ray* rays) const {
   return true;
 }
 
-template <bool AnyHit>
-void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const {
+namespace {
+
+/// BoxTree::trace_packet with leaf tests of four boxes, or of eight when Wide (AVX2).
+template <bool AnyHit, bool Wide>
+void trace_packet_of(const BoxTree& tree, const Ray* rays, RayRange range, Hit* hits, RayStats& stats) {
+  constexpr std::uint32_t step_blocks = Wide ? 2 : 1;  // leaf blocks tested together
+  const Box3f& bounds = tree.bounds();
   std::array<detail::TraversalRay<float>, 4> lane_ray{
       detail::TraversalRay<float>(rays[0]), detail::TraversalRay<float>(rays[1]),
       detail::TraversalRay<float>(rays[2]), detail::TraversalRay<float>(rays[3])};
@@ -90,8 +95,8 @@ void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats&
   // The scene's bounds, as clip_widened does it for one ray.
   __m128 t_entry = _mm_set1_ps(range.t_min), t_exit = _mm_set1_ps(range.t_max);
   for (int a = 0; a < 3; ++a) {
-    __m128 t0 = _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(bounds_.lo[a]), origin[a]), inverse[a]);
-    __m128 t1 = _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(bounds_.hi[a]), origin[a]), inverse[a]);
+    __m128 t0 = _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(bounds.lo[a]), origin[a]), inverse[a]);
+    __m128 t1 = _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(bounds.hi[a]), origin[a]), inverse[a]);
     if (r0.negative[a]) std::swap(t0, t1);
     t_entry = _mm_max_ps(t_entry, widen_down4(t0));
     t_exit = _mm_min_ps(t_exit, widen_up4(t1));
@@ -125,24 +130,26 @@ void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats&
     for (;;) {
       const unsigned count_active = static_cast<unsigned>(__builtin_popcount(active));
       stats.nodes_visited += count_active;
-      const BoxNode node = nodes_[index];
+      const BoxNode node = tree.nodes()[index];
       if (node.is_leaf()) {
         const std::uint32_t count = node.count();
         stats.boxes_tested += static_cast<std::uint64_t>(count) * count_active;
         for (unsigned l = 0; l < 4; ++l) {
           if (!(active >> l & 1u)) continue;
-          const LeafBlock* blocks = blocks_.data() + node.first() / 4;
-          const std::uint32_t* ids = references_.data() + node.first();
-          for (std::uint32_t first = 0; first < count; first += 4, ++blocks, ids += 4) {
+          const LeafBlock* blocks = tree.leaf_blocks().data() + node.first() / 4;
+          const std::uint32_t* ids = tree.references().data() + node.first();
+          for (std::uint32_t first = 0; first < count;
+               first += 4 * step_blocks, blocks += step_blocks, ids += 4 * step_blocks) {
             // No mask on the lanes past count: they repeat the last box (as in traverse.cpp).
-            unsigned lanes =
-                detail::block_candidates<float>(*blocks, lane_ray[l], range.t_min, best_bound[l]);
+            unsigned lanes = detail::leaf_step_candidates<float, Wide>(blocks, count - first, lane_ray[l],
+                                                                       range.t_min, best_bound[l]);
             while (lanes != 0) {
               const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
               lanes &= lanes - 1;
               double t_near = range.t_min, t_far = best_t[l];
               if (!exact[l]) exact[l].emplace(rays[l]);
-              if (!clip_to_box(detail::box_in_lane(*blocks, lane), *exact[l], t_near, t_far)) continue;
+              if (!clip_to_box(detail::box_in_lane(blocks[lane / 4], lane % 4), *exact[l], t_near, t_far))
+                continue;
               const auto box = static_cast<std::int32_t>(ids[lane]);
               if constexpr (AnyHit) {
                 best_t[l] = t_near;
@@ -192,6 +199,25 @@ void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats&
   }
   for (int l = 0; l < 4; ++l)
     if (best_box[l] != Hit::none) hits[l] = Hit{best_box[l], detail::to_float_t(best_t[l])};
+}
+
+#if defined(KDSPACE_RAYS_AVX2)
+// Compiled for AVX2: `flatten` inlines the packet traversal here, and the eight-box filter into it.
+template <bool AnyHit>
+__attribute__((target("avx2"), flatten)) void trace_packet_wide(const BoxTree& tree, const Ray* rays,
+                                                                RayRange range, Hit* hits, RayStats& stats) {
+  trace_packet_of<AnyHit, true>(tree, rays, range, hits, stats);
+}
+#endif
+
+}  // namespace
+
+template <bool AnyHit>
+void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const {
+#if defined(KDSPACE_RAYS_AVX2)
+  if (detail::has_avx2()) return trace_packet_wide<AnyHit>(*this, rays, range, hits, stats);
+#endif
+  trace_packet_of<AnyHit, false>(*this, rays, range, hits, stats);
 }
 
 #else  // no SSE2: no packets, every ray alone

@@ -1,5 +1,6 @@
 // A ray prepared for the BoxTree traversal in float or in double, the widening that keeps the
-// traversal's decisions conservative, and the four-at-a-time box filter of the float traversal.
+// traversal's decisions conservative, and the box filter of the float traversal (four boxes at a
+// time with SSE2, eight with AVX2).
 //
 // Why float is safe (TraversalRay<float>): for a scene and an origin within +-2^62 and direction
 // components 0 or of magnitude 2^-64 .. 2^64, a ray parameter t = (plane - origin) * (1 / direction)
@@ -259,5 +260,21 @@ __attribute__((target("avx2"))) inline unsigned block_pair_candidates(const Leaf
   return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(t_near, t_far, _CMP_LE_OQ)));
 }
 #endif
+
+/// Lanes of a leaf's next blocks whose box the ray may hit within [t_lo, t_hi] (block_candidates):
+/// one block (bits 0-3), or two (bits 0-7) when Wide. `remaining` (> 0) counts the leaf's boxes from
+/// `blocks` on; a leaf's last block, when it is alone, is tested twice and its second copy's lanes
+/// dropped, so no block past the leaf is read.
+template <class Real, bool Wide>
+inline unsigned leaf_step_candidates(const LeafBlock* blocks, std::uint32_t remaining,
+                                     const TraversalRay<Real>& r, Real t_lo, Real t_hi) {
+#if defined(KDSPACE_RAYS_AVX2)
+  if constexpr (Wide) {
+    const std::uint32_t two = remaining > 4;
+    return block_pair_candidates(blocks[0], blocks[two], r, t_lo, t_hi) & (0x0fu | (0xf0u & (0u - two)));
+  }
+#endif
+  return block_candidates<Real>(blocks[0], r, t_lo, t_hi);
+}
 
 }  // namespace kdspace::detail

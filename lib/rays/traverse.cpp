@@ -13,7 +13,8 @@
 //     t = (face - origin) * (1 / direction) (detail::clip_to_box);
 //   - the traversal runs in float (TraversalRay<float>) when the scene and the ray keep every ray
 //     parameter inside the float range, else in double; in float, each leaf's boxes pass a
-//     four-at-a-time float filter first (block_candidates), and only the boxes it lets through get the
+//     float filter first, four (block_candidates) or with AVX2 eight boxes at a time
+//     (block_pair_candidates), and only the boxes it lets through get the
 //     double test. Every float parameter is widened by far more than its rounding (traversal_ray.hpp),
 //     so the float traversal visits every cell and lets through every box that a double traversal
 //     would: the answers are the double traversal's;
@@ -76,23 +77,6 @@ void check_ray(const Ray& ray) {
   if (!problem.empty()) throw Error("ray: " + problem);
 }
 
-/// Lanes of a leaf's next blocks whose box the ray may hit within [t_lo, t_hi] (block_candidates):
-/// one block (bits 0-3), or two (bits 0-7) when Wide. `remaining` (> 0) counts the leaf's boxes from
-/// `blocks` on; a leaf's last block, when it is alone, is tested twice and its second copy's lanes
-/// dropped, so no block past the leaf is read.
-template <class Real, bool Wide>
-inline unsigned leaf_step_candidates(const LeafBlock* blocks, std::uint32_t remaining,
-                                     const detail::TraversalRay<Real>& r, Real t_lo, Real t_hi) {
-#if defined(KDSPACE_RAYS_AVX2)
-  if constexpr (Wide) {
-    const std::uint32_t two = remaining > 4;
-    return detail::block_pair_candidates(blocks[0], blocks[two], r, t_lo, t_hi) &
-           (0x0fu | (0xf0u & (0u - two)));
-  }
-#endif
-  return detail::block_candidates<Real>(blocks[0], r, t_lo, t_hi);
-}
-
 }  // namespace
 
 template <class Real, bool AnyHit, bool Wide>
@@ -139,7 +123,8 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
           // are not masked off: a repeated box gives the same hit, which changes nothing (equal t,
           // equal index), and the mask cost a branch at every block (3.5% of the instructions of a
           // random ray that hits).
-          unsigned lanes = leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best_bound);
+          unsigned lanes =
+              detail::leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best_bound);
           while (lanes != 0) {
             const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
             lanes &= lanes - 1;

@@ -22,7 +22,7 @@
 // precision (t = (face - origin) * (1 / direction), the reciprocal precomputed); the reported t is
 // that value rounded to float (a hit farther than the float range reports FLT_MAX). The traversal
 // itself runs in float, its intervals widened by far more than float rounding, and tests a leaf's
-// boxes four at a time in float, as a filter that can only let through more boxes than the double
+// boxes four (with AVX2 eight) at a time in float, a filter that lets through no fewer than the double
 // test accepts; so the answers are those of a traversal in double (rays whose parameters could leave
 // the float range are traced in double).
 #pragma once
