@@ -175,7 +175,7 @@ std::vector<double> boxsize_for(Shape shape, std::size_t dim, bool periodic) {
 }
 
 /// Runs every join on one case and checks it against brute force.
-template <class T, class Metric>
+template <class T, class Metric, int Dim = kdspace::Dynamic>
 void check_case(const Case& c, bool periodic, std::uint32_t seed) {
   CAPTURE(kdspace_test::name(c.shape), c.n, c.dim, periodic, Metric::name, kdspace_test::type_name<T>());
   const Torus<T> space(boxsize_for<T>(c.shape, c.dim, periodic), c.dim);
@@ -186,8 +186,8 @@ void check_case(const Case& c, bool periodic, std::uint32_t seed) {
   const std::size_t n = c.n, m = others.size() / c.dim;
   kdspace::BuildParams build;
   build.leaf_size = 1 + seed % 12;  // small leaves: deep trees, many node pairs
-  const PointTree<T, kdspace::Dynamic, Metric> tree(points.data(), n, c.dim, build);
-  const PointTree<T, kdspace::Dynamic, Metric> other_tree(others.data(), m, c.dim, build);
+  const PointTree<T, Dim, Metric> tree(points.data(), n, c.dim, build);
+  const PointTree<T, Dim, Metric> other_tree(others.data(), m, c.dim, build);
   JoinParams params;
   params.threads = 1;
   params.boxsize = space.boxsize;
@@ -256,6 +256,30 @@ TEST_CASE("joins: every join equals brute force bit for bit on a torus", "[joins
   for (const Case& c : cases) {
     check_case<float, kdspace::L2>(c, true, seed++);
     check_case<double, kdspace::L2>(c, true, seed++);
+  }
+}
+
+// The leaf-pair base cases run in their AVX2 compilation where the processor has AVX2 (traversal.hpp);
+// here the baseline compilation is checked too, on every shape, on the fixed 3-D trees of the
+// benchmarks, whose leaves of up to 64 points span several blocks of 8.
+TEST_CASE("joins: the baseline and the AVX2 base cases equal brute force on 3-D trees", "[joins][exact][periodic]") {
+  struct Restore {
+    bool& avx2 = kdspace::detail::join_avx2();
+    const bool had = avx2;
+    ~Restore() { avx2 = had; }
+  } restore;
+  std::uint32_t seed = 400;
+  for (const bool avx2 : {false, restore.had}) {  // AVX2 only where the processor has it
+    CAPTURE(avx2);
+    restore.avx2 = avx2;
+    for (const Shape shape : {Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid, Shape::identical,
+                              Shape::flat, Shape::sorted_x}) {
+      const Case c{shape, 400, 3};
+      for (const bool periodic : {false, true}) {
+        check_case<float, kdspace::L2, 3>(c, periodic, seed++);
+        check_case<double, kdspace::L2, 3>(c, periodic, seed++);
+      }
+    }
   }
 }
 
