@@ -67,6 +67,9 @@ namespace detail {
 // points, double, the tree's default leaf of 16): k-NN (k = 10) 16: 0.35 s, 32: 0.30 s, 64: 0.31 s;
 // pairs within r 16: 0.135 s, 32: 0.135 s, 64: 0.105 s, 128: slower; counts at 20 radii 16: 1.21 s,
 // 32: 1.31 s, 64: 1.70 s (block counts of leaves, callgrind, 2e5 points: 16: 5.45e9, 32: 5.64e9).
+// With the AVX2 base cases, whose distances cost less, larger leaves still lose (callgrind, 2e5
+// uniform 3-D points, double, whole program): k-NN 32: 1.315e9, 48: 1.343e9, 64: 1.394e9; pairs
+// 64: 0.587e9, 96: 0.612e9, 128: 0.653e9.
 inline constexpr std::size_t knn_leaf_points = 32;
 inline constexpr std::size_t range_leaf_points = 64;
 inline constexpr std::size_t count_leaf_points = 16;
