@@ -723,8 +723,8 @@ TEST_CASE("rays: nearly parallel rays and rays with subnormal direction componen
 
 TEST_CASE("rays: the eight-box leaf filter lets through exactly the lanes of two four-box filters",
           "[rays]") {
-#if defined(KDSPACE_RAYS_AVX2)
-  if (!kdspace::detail::has_avx2()) return;  // no AVX2 (or KDSPACE_RAYS_NO_AVX2): the traversal never uses it
+#if defined(KDSPACE_AVX2_DISPATCH)
+  if (!kdspace::detail::avx2_dispatch()) return;  // no AVX2 (or KDSPACE_NO_AVX2): the traversal never uses it
   // Blocks of flat, thin and overlapping boxes, rays from inside and outside with zero, tiny and
   // negative direction components, over several intervals: the masks must agree bit for bit (the
   // eight lanes compute what the four lanes compute, in the same order of operations).

@@ -201,7 +201,7 @@ void trace_packet_of(const BoxTree& tree, const Ray* rays, RayRange range, Hit* 
     if (best_box[l] != Hit::none) hits[l] = Hit{best_box[l], detail::to_float_t(best_t[l])};
 }
 
-#if defined(KDSPACE_RAYS_AVX2)
+#if defined(KDSPACE_AVX2_DISPATCH)
 // Compiled for AVX2: `flatten` inlines the packet traversal here, and the eight-box filter into it.
 template <bool AnyHit>
 __attribute__((target("avx2"), flatten)) void trace_packet_wide(const BoxTree& tree, const Ray* rays,
@@ -214,8 +214,8 @@ __attribute__((target("avx2"), flatten)) void trace_packet_wide(const BoxTree& t
 
 template <bool AnyHit>
 void BoxTree::trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const {
-#if defined(KDSPACE_RAYS_AVX2)
-  if (detail::has_avx2()) return trace_packet_wide<AnyHit>(*this, rays, range, hits, stats);
+#if defined(KDSPACE_AVX2_DISPATCH)
+  if (detail::avx2_dispatch()) return trace_packet_wide<AnyHit>(*this, rays, range, hits, stats);
 #endif
   trace_packet_of<AnyHit, false>(*this, rays, range, hits, stats);
 }

@@ -27,8 +27,8 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#define KDSPACE_RAYS_AVX2 1
+#include "kdspace/detail/avx2_dispatch.hpp"
+#if defined(KDSPACE_AVX2_DISPATCH)
 #include <immintrin.h>
 #endif
 
@@ -221,15 +221,7 @@ inline unsigned block_candidates<float>(const LeafBlock& block, const TraversalR
 #endif
 }
 
-#if defined(KDSPACE_RAYS_AVX2)
-/// True when the processor runs AVX2 (the eight-box leaf filter below) and the environment variable
-/// KDSPACE_RAYS_NO_AVX2 is not set (it makes the traversal test four boxes at a time, as without
-/// AVX2: the tests run both ways).
-inline bool has_avx2() {
-  static const bool yes = __builtin_cpu_supports("avx2") && std::getenv("KDSPACE_RAYS_NO_AVX2") == nullptr;
-  return yes;
-}
-
+#if defined(KDSPACE_AVX2_DISPATCH)
 /// block_candidates<float> for eight boxes at once: the leaf's blocks `first` (bits 0-3) and
 /// `second` (bits 4-7), each half of a 256-bit register. The same filter lane by lane.
 __attribute__((target("avx2"))) inline unsigned block_pair_candidates(const LeafBlock& first,
@@ -268,7 +260,7 @@ __attribute__((target("avx2"))) inline unsigned block_pair_candidates(const Leaf
 template <class Real, bool Wide>
 inline unsigned leaf_step_candidates(const LeafBlock* blocks, std::uint32_t remaining,
                                      const TraversalRay<Real>& r, Real t_lo, Real t_hi) {
-#if defined(KDSPACE_RAYS_AVX2)
+#if defined(KDSPACE_AVX2_DISPATCH)
   if constexpr (Wide) {
     const std::uint32_t two = remaining > 4;
     return block_pair_candidates(blocks[0], blocks[two], r, t_lo, t_hi) & (0x0fu | (0xf0u & (0u - two)));

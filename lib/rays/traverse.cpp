@@ -180,15 +180,15 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
 template <bool AnyHit>
 Hit BoxTree::trace_any_precision(const Ray& ray, float t_min, float t_max, RayStats& stats) const {
   if (float_range_ && detail::fits_float_traversal(ray, float_trace_limit)) {
-#if defined(KDSPACE_RAYS_AVX2)
-    if (detail::has_avx2()) return trace_wide<AnyHit>(ray, t_min, t_max, stats);
+#if defined(KDSPACE_AVX2_DISPATCH)
+    if (detail::avx2_dispatch()) return trace_wide<AnyHit>(ray, t_min, t_max, stats);
 #endif
     return trace<float, AnyHit>(ray, t_min, t_max, stats);
   }
   return trace<double, AnyHit>(ray, t_min, t_max, stats);
 }
 
-#if defined(KDSPACE_RAYS_AVX2)
+#if defined(KDSPACE_AVX2_DISPATCH)
 // The float traversal compiled for AVX2, its leaves tested eight boxes at a time: `flatten` inlines
 // the traversal here, where the eight-box filter (an AVX2 function) can be inlined in turn.
 template <bool AnyHit>

@@ -30,39 +30,14 @@
 #include <emmintrin.h>
 #endif
 
+#include "kdspace/detail/avx2_dispatch.hpp"
 #include "kdspace/joins/join_stats.hpp"
 
-// The leaf-pair base cases are compiled twice: for the baseline instruction set (SSE2 on x86-64) and,
-// on x86-64 with GCC or Clang, for AVX2, chosen at run time. The base cases' loops over a block of 8
-// points (space.hpp's distances and lower bounds) then take 4 doubles or 8 floats per instruction
-// rather than 2 or 4. The operations and their order are the same (IEEE subtraction, multiplication,
-// addition, minimum and maximum, never contracted into fused multiply-adds: the target adds no FMA),
-// so the answers are the same bit for bit on either path.
-#if (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__))
-#define KDSPACE_JOIN_AVX2 1
-#endif
+// The leaf-pair base cases run in their AVX2 compilation where the processor has it
+// (avx2_dispatch.hpp): the loops over a block of 8 points (space.hpp's distances and lower bounds)
+// then take 4 doubles or 8 floats per instruction rather than 2 or 4, with the same answers.
 
 namespace kdspace::detail {
-
-/// Whether the base cases run in their AVX2 compilation: the processor has AVX2 (checked once). The
-/// tests turn it off to check the baseline compilation too; joins read it when they start.
-inline bool& join_avx2() {
-#if defined(KDSPACE_JOIN_AVX2)
-  static bool on = __builtin_cpu_supports("avx2");
-#else
-  static bool on = false;
-#endif
-  return on;
-}
-
-#if defined(KDSPACE_JOIN_AVX2)
-/// f() compiled for AVX2: `flatten` inlines what f calls (the rule's base case and its loops) into
-/// this function, so that all of it is compiled for this target.
-template <class F>
-__attribute__((target("avx2"), flatten)) void with_avx2(F&& f) {
-  f();
-}
-#endif
 
 template <class T, class Context>
 struct JoinScore {
@@ -76,7 +51,7 @@ class DualTraversal {
  public:
   using Context = typename Rule::Context;
 
-  DualTraversal(Rule& rule, JoinStats& stats) : rule_(rule), stats_(stats), avx2_(join_avx2()) {}
+  DualTraversal(Rule& rule, JoinStats& stats) : rule_(rule), stats_(stats), avx2_(avx2_dispatch()) {}
 
   /// Visits the pairs below (q, r), starting with the rule's score of (q, r) itself.
   void run(std::uint32_t q, std::uint32_t r, const Context& context) {
@@ -118,7 +93,7 @@ class DualTraversal {
   }
 
   void base_case(std::uint32_t q, std::uint32_t r, const Context& context) {
-#if defined(KDSPACE_JOIN_AVX2)
+#if defined(KDSPACE_AVX2_DISPATCH)
     if (avx2_) {
       with_avx2([&] { rule_.base_case(q, r, context); });
       return;
