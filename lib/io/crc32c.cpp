@@ -173,7 +173,7 @@ __attribute__((target("avx512f,vpclmulqdq,pclmul,sse4.2"))) std::uint32_t update
                              by64 = fold_by(64), by48 = fold_by(48), by32 = fold_by(32), by16 = fold_by(16);
   // The register enters as the first four bytes' xor (update(c, M) = update(0, M ^ c)).
   __m512i x0 =
-      _mm512_xor_si512(_mm512_loadu_si512(p), _mm512_castsi128_si512(_mm_cvtsi32_si128(static_cast<int>(c))));
+      _mm512_xor_si512(_mm512_loadu_si512(p), _mm512_zextsi128_si512(_mm_cvtsi32_si128(static_cast<int>(c))));
   __m512i x1 = _mm512_loadu_si512(p + 64), x2 = _mm512_loadu_si512(p + 128), x3 = _mm512_loadu_si512(p + 192);
   p += 256;
   n -= 256;

@@ -228,7 +228,7 @@ PointTree<T, Dim, Metric> load_point_tree(const std::string& path, LoadMode mode
   std::optional<PointTree<T, Dim, Metric>> tree;
   try {
     tree.emplace(detail::point_tree_of<T, Dim, Metric>(file, &checksums));
-  } catch (const Error&) {
+  } catch (...) {
     checksums.finish();  // a damaged section explains any other problem: its message wins
     throw;
   }
