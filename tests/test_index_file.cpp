@@ -78,6 +78,14 @@ struct SmallIndex {
   PointTree<float> tree{points.data(), 60, 3, params};
 };
 
+// A 3-D float tree over n points of `shape` (make_points with `seed`), saved at `path`.
+PointTree<float> saved_tree(const std::string& path, Shape shape, std::size_t n, std::uint32_t seed) {
+  const auto points = kdspace_test::make_points<float>(shape, n, 3, seed);
+  PointTree<float> tree(points.data(), n, 3);
+  io::save(path, tree);
+  return tree;
+}
+
 }  // namespace
 
 TEST_CASE("index: CRC-32C has the standard check value, in hardware (crc32, or folding) and in software",
@@ -328,10 +336,8 @@ TEST_CASE("index: a large file, checked in chunks on two threads, still catches 
   TempDir tmp;
   const std::size_t n = std::size_t{3} << 16;  // above kdspace::detail::parallel_tree_check
   REQUIRE(n >= kdspace::detail::parallel_tree_check);
-  const auto points = kdspace_test::make_points<float>(Shape::uniform, n, 3, 8);
-  const PointTree<float> tree(points.data(), n, 3);
   const std::string path = tmp.file("large.kdx");
-  io::save(path, tree);
+  const PointTree<float> tree = saved_tree(path, Shape::uniform, n, 8);
   const auto info = io::IndexFile::open(path)->info();
   std::vector<std::uint64_t> spots;
   for (const io::SectionEntry& s : info.sections) {
@@ -369,11 +375,9 @@ TEST_CASE("index: a point order that is no permutation is named, in a tree check
   // With every checksum resealed, only the structural checks stand in the way: the message names the
   // first index that is out of range or given twice, as the one-thread check did.
   const std::size_t n = kdspace::detail::parallel_tree_check + 1000;
-  const auto points = kdspace_test::make_points<float>(Shape::clustered, n, 3, 9);
-  const PointTree<float> tree(points.data(), n, 3);
   TempDir tmp;
   const std::string path = tmp.file("order.kdx");
-  io::save(path, tree);
+  saved_tree(path, Shape::clustered, n, 9);
   const std::vector<unsigned char> bytes = file_bytes(path);
   const io::SectionEntry order = *io::IndexFile::open(path)->find(io::SectionType::order);
   auto with_order = [&](std::size_t i, std::uint32_t value) {
@@ -406,11 +410,9 @@ TEST_CASE(
   // two walks split along) is named too.
   const std::size_t n = std::size_t{3} << 16;
   REQUIRE(n >= kdspace::detail::parallel_tree_check);
-  const auto points = kdspace_test::make_points<float>(Shape::uniform, n, 3, 10);
-  const PointTree<float> tree(points.data(), n, 3);
   TempDir tmp;
   const std::string path = tmp.file("walks.kdx");
-  io::save(path, tree);
+  const PointTree<float> tree = saved_tree(path, Shape::uniform, n, 10);
   const std::vector<unsigned char> bytes = file_bytes(path);
   const auto file = io::IndexFile::open(path);
   const io::SectionEntry nodes = *file->find(io::SectionType::nodes);
