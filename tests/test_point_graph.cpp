@@ -200,7 +200,8 @@ TEST_CASE("graph: a seed gives one graph; byte rows give the graph of their valu
   params.seed = 3;
   const PointForest<float> a(pts.data(), n, dim, params), b(pts.data(), n, dim, params);
   CHECK(a.graph().links == b.graph().links);
-  // Kept as bytes, the build scores in integers; as floats, with the float kernel: the same sums.
+  // Kept as bytes, the build scores the bytes; as floats, their 16-bit grid, whose power-of-two scale
+  // keeps integer values exact: every distance times the same power of four, so the same order.
   ForestParams wide = params;
   wide.compact = false;
   const PointForest<float> floats(pts.data(), n, dim, wide);

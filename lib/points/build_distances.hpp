@@ -1,19 +1,27 @@
-// The scorer the neighbour graph's build uses on float rows: squared L2 distances from a row to 4
-// rows at once, 4 coordinates to a vector, one vector a coordinate block and row (the last block of
-// a row whose dimension is not a multiple of 4 is the row's last 4 coordinates, with the lanes
-// already added masked off, so no read goes past a row).
+// The rows the neighbour graph's build scores when the points are not bytes: each coordinate
+// rounded to an integer of 16 bits, on one scale for all axes, and squared L2 distances between
+// such rows in integer arithmetic, 8 coordinates to a vector.
 //
-// Its sums are not internal_distance()'s (which adds in 8 lanes, then the remaining coordinates one
-// by one, so that every answer is the brute-force distance bit for bit): the build only compares
-// these distances with each other, and any fixed order gives the same graph on any thread count.
-// On 20-D and 39-D rows the exact kernel's scalar tail and lane bookkeeping cost about as much as its
-// arithmetic: with this one the build of the graph over 30,000 music frames (20-D) took 13% fewer
-// instructions in all (callgrind), for the same recall at every ef.
+// The build only compares distances with each other (the graph keeps no distance), so it may
+// compare those of a copy of the points at a finer grain than their spread: an offset per axis does
+// not change any distance, and one scale for every axis changes all of them by the same factor.
+// The scale puts the widest axis on [0, top] (more than half of it), top chosen so that a squared
+// distance fits in 32 bits (14,654 for 20 coordinates, 10,494 for 39, 2,115 for 960); the rounding then moves a
+// distance by far less than the gaps between a point's neighbours. Against float rows scored 4
+// coordinates a vector, the build over 95k music frames (20-D) took 3% fewer instructions in all
+// (callgrind, net of the 0.08 billion the rounding costs) and about 2% less time, for the same
+// recall at every ef within 0.0005; the copy takes half the memory of float rows while the graph
+// is built.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <vector>
+
+#include "graph_search.hpp"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -21,92 +29,108 @@
 
 namespace kdspace::detail {
 
-class BuildFloatScorer {
+/// The rows (n of `dim` values of U) on the grid described above.
+template <class U>
+std::vector<std::uint16_t> quantize_rows(const U* rows, std::size_t n, std::size_t dim) {
+  std::vector<double> low(dim, std::numeric_limits<double>::infinity()), high(dim, -low[0]);
+  for (std::size_t r = 0; r < n; ++r)
+    for (std::size_t a = 0; a < dim; ++a) {
+      const double x = static_cast<double>(rows[r * dim + a]);
+      low[a] = std::min(low[a], x), high[a] = std::max(high[a], x);
+    }
+  double widest = 0;
+  for (std::size_t a = 0; a < dim; ++a) widest = std::max(widest, high[a] - low[a]);
+  // Each coordinate's difference fits in int16, a pair of squares in int32, a row's sum in uint32.
+  const double top = std::min(32767.0, std::floor(std::sqrt(4294967295.0 / static_cast<double>(std::max<std::size_t>(dim, 1)))));
+  // A power of two (at most one bit of resolution lost): integer coordinates then stay integers,
+  // every distance is the same multiple of their own (a power of four) and converts to T with the
+  // same rounding, so points of integer values get the graph their byte rows get.
+  const double scale = widest > 0 ? std::exp2(std::floor(std::log2(top / widest))) : 0;
+  std::vector<std::uint16_t> out(n * dim);
+  for (std::size_t r = 0; r < n; ++r)
+    for (std::size_t a = 0; a < dim; ++a) {
+      const double x = (static_cast<double>(rows[r * dim + a]) - low[a]) * scale;
+      out[r * dim + a] = static_cast<std::uint16_t>(std::clamp(std::round(x), 0.0, top));
+    }
+  return out;
+}
+
+/// Squared L2 distances from a quantized row to 4 quantized rows at once, exact in integers (then
+/// converted to T).
+template <class T>
+class QuantizedRowScorer {
  public:
-  using Scalar = float;
+  using Scalar = T;
   static constexpr std::size_t group = 4;
 
-  BuildFloatScorer(const float* rows, std::size_t dim, const float* q)
-      : rows_(rows), dim_(dim), q_(q), lines_((dim * sizeof(float) + 63) / 64) {
+  QuantizedRowScorer(const std::uint16_t* rows, std::size_t dim, const std::uint16_t* q)
+      : rows_(rows), dim_(dim), q_(q) {
 #if defined(__SSE2__)
-    const std::size_t left = dim % 4;  // coordinates of the last block not in a full one
-    alignas(16) std::int32_t lanes[4];
-    for (std::size_t j = 0; j < 4; ++j) lanes[j] = left > 0 && j >= 4 - left ? -1 : 0;
-    tail_mask_ = _mm_castsi128_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(lanes)));
+    // The last block of a row whose dimension is not a multiple of 8 is its last 8 coordinates,
+    // with the lanes a full block already counted masked off (no read past a row).
+    const std::size_t left = dim % 8;
+    alignas(16) std::int16_t lanes[8];
+    for (std::size_t j = 0; j < 8; ++j) lanes[j] = left > 0 && j >= 8 - left ? -1 : 0;
+    tail_mask_ = _mm_load_si128(reinterpret_cast<const __m128i*>(lanes));
 #endif
   }
   void prefetch(std::uint32_t row) const {
-    const char* first_byte = reinterpret_cast<const char*>(rows_ + std::size_t{row} * dim_);
-    for (std::size_t line = 0; line < lines_; ++line) __builtin_prefetch(first_byte + 64 * line);
+    prefetch_bytes(rows_ + std::size_t{row} * dim_, dim_ * sizeof(std::uint16_t));
   }
-  /// Distances of the rows ids[0, 4), or, once all four are sure to be above `limit`, values above it.
-  void operator()(const std::uint32_t* ids, float limit, float* out) const {
+  /// Distances of the rows ids[0, 4).
+  void operator()(const std::uint32_t* ids, T, T* out) const {
+    const std::uint16_t* r[group];
+    for (std::size_t g = 0; g < group; ++g) r[g] = rows_ + std::size_t{ids[g]} * dim_;
 #if defined(__SSE2__)
-    if (dim_ < 4) return scalar(ids, out);
-    const float* r0 = rows_ + std::size_t{ids[0]} * dim_;
-    const float* r1 = rows_ + std::size_t{ids[1]} * dim_;
-    const float* r2 = rows_ + std::size_t{ids[2]} * dim_;
-    const float* r3 = rows_ + std::size_t{ids[3]} * dim_;
-    __m128 a0 = _mm_setzero_ps(), a1 = a0, a2 = a0, a3 = a0;
-    auto add = [](__m128 acc, __m128 x, const float* row) {
-      const __m128 d = _mm_sub_ps(x, _mm_loadu_ps(row));
-      return _mm_add_ps(acc, _mm_mul_ps(d, d));
-    };
-    // Long rows stop early once all four partial sums (which only grow) are above the limit.
-    const bool early_exit =
-        dim_ >= 2 * coordinates_between_checks && limit < std::numeric_limits<float>::infinity();
-    std::size_t i = 0;
-    for (; i + 4 <= dim_; i += 4) {
-      const __m128 x = _mm_loadu_ps(q_ + i);
-      a0 = add(a0, x, r0 + i), a1 = add(a1, x, r1 + i), a2 = add(a2, x, r2 + i), a3 = add(a3, x, r3 + i);
-      if (early_exit && (i + 4) % coordinates_between_checks == 0 && i + 4 < dim_) {
-        sums(a0, a1, a2, a3, out);
-        if (out[0] > limit && out[1] > limit && out[2] > limit && out[3] > limit) return;
+    if (dim_ >= 8) {
+      __m128i acc[group];
+      for (std::size_t g = 0; g < group; ++g) acc[g] = _mm_setzero_si128();
+      std::size_t i = 0;
+      for (; i + 8 <= dim_; i += 8) {
+        const __m128i x = load(q_ + i);
+        for (std::size_t g = 0; g < group; ++g) {
+          const __m128i d = _mm_sub_epi16(x, load(r[g] + i));
+          acc[g] = _mm_add_epi32(acc[g], _mm_madd_epi16(d, d));
+        }
       }
+      if (i < dim_) {
+        const std::size_t last = dim_ - 8;
+        const __m128i x = load(q_ + last);
+        for (std::size_t g = 0; g < group; ++g) {
+          const __m128i d = _mm_and_si128(_mm_sub_epi16(x, load(r[g] + last)), tail_mask_);
+          acc[g] = _mm_add_epi32(acc[g], _mm_madd_epi16(d, d));
+        }
+      }
+      // The horizontal sums of the four accumulators (32-bit lanes that wrap as unsigned: the
+      // total fits in 32 bits, a pair of squares in 31).
+      const __m128i t0 = _mm_unpacklo_epi32(acc[0], acc[1]), t1 = _mm_unpackhi_epi32(acc[0], acc[1]);
+      const __m128i t2 = _mm_unpacklo_epi32(acc[2], acc[3]), t3 = _mm_unpackhi_epi32(acc[2], acc[3]);
+      const __m128i s01 = _mm_add_epi32(t0, t1), s23 = _mm_add_epi32(t2, t3);
+      const __m128i sums = _mm_add_epi32(_mm_unpacklo_epi64(s01, s23), _mm_unpackhi_epi64(s01, s23));
+      alignas(16) std::uint32_t lanes[group];
+      _mm_store_si128(reinterpret_cast<__m128i*>(lanes), sums);
+      for (std::size_t g = 0; g < group; ++g) out[g] = static_cast<T>(lanes[g]);
+      return;
     }
-    if (i < dim_) {
-      const std::size_t last = dim_ - 4;
-      const __m128 x = _mm_loadu_ps(q_ + last);
-      auto add_tail = [&](__m128 acc, const float* row) {
-        const __m128 d = _mm_and_ps(_mm_sub_ps(x, _mm_loadu_ps(row + last)), tail_mask_);
-        return _mm_add_ps(acc, _mm_mul_ps(d, d));
-      };
-      a0 = add_tail(a0, r0), a1 = add_tail(a1, r1), a2 = add_tail(a2, r2), a3 = add_tail(a3, r3);
-    }
-    sums(a0, a1, a2, a3, out);
-#else
-    (void)limit;
-    scalar(ids, out);
 #endif
+    for (std::size_t g = 0; g < group; ++g) {
+      std::uint32_t sum = 0;
+      for (std::size_t i = 0; i < dim_; ++i) {
+        const std::int32_t d = std::int32_t{q_[i]} - std::int32_t{r[g][i]};
+        sum += static_cast<std::uint32_t>(d * d);
+      }
+      out[g] = static_cast<T>(sum);
+    }
   }
 
  private:
 #if defined(__SSE2__)
-  static constexpr std::size_t coordinates_between_checks = 64;
-
-  // The horizontal sums of four accumulators at once (a 4 x 4 transpose, then three adds).
-  static void sums(__m128 a0, __m128 a1, __m128 a2, __m128 a3, float* out) {
-    _MM_TRANSPOSE4_PS(a0, a1, a2, a3);
-    _mm_storeu_ps(out, _mm_add_ps(_mm_add_ps(a0, a1), _mm_add_ps(a2, a3)));
-  }
+  static __m128i load(const std::uint16_t* p) { return _mm_loadu_si128(reinterpret_cast<const __m128i*>(p)); }
+  __m128i tail_mask_;
 #endif
-  // Without SSE2, and for rows of fewer than 4 coordinates.
-  void scalar(const std::uint32_t* ids, float* out) const {
-    for (std::size_t g = 0; g < group; ++g) {
-      const float* row = rows_ + std::size_t{ids[g]} * dim_;
-      float sum = 0;
-      for (std::size_t i = 0; i < dim_; ++i) sum += (q_[i] - row[i]) * (q_[i] - row[i]);
-      out[g] = sum;
-    }
-  }
-
-  const float* rows_;
+  const std::uint16_t* rows_;
   std::size_t dim_;
-  const float* q_;
-  std::size_t lines_;
-#if defined(__SSE2__)
-  __m128 tail_mask_;
-#endif
+  const std::uint16_t* q_;
 };
 
 }  // namespace kdspace::detail

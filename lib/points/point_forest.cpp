@@ -47,7 +47,7 @@ class TreeBuilder {
 
   TreeBuilder(const float* proj, std::size_t n, std::size_t m, const ForestParams& params, std::size_t tree)
       : proj_(proj), n_(n), m_(m), params_(params), rng_(tree_generator(params.seed, tree)),
-        variance_(m), axes_(m) {}
+        variance_(m), axes_(m), axes_sum_(m), axes_squares_(m) {}
 
   template <class Node>
   Result<Node> build() {
@@ -74,21 +74,27 @@ class TreeBuilder {
   // Returns m_ when every axis is flat (the node becomes a leaf).
   std::size_t choose_axis(const std::uint32_t* rows, std::size_t count) {
     const std::size_t sample = std::min(count, params_.variance_sample);
-    std::fill(variance_.begin(), variance_.end(), 0.0);
-    std::vector<double>& mean = axes_mean_;
-    mean.assign(m_, 0.0);
-    for (std::size_t s = 0; s < sample; ++s) {
-      const std::uint32_t row = rows[s * count / sample];
-      for (std::size_t a = 0; a < m_; ++a) mean[a] += coord(row, a);
-    }
-    for (std::size_t a = 0; a < m_; ++a) mean[a] /= static_cast<double>(sample);
-    for (std::size_t s = 0; s < sample; ++s) {
-      const std::uint32_t row = rows[s * count / sample];
+    // One pass over the sample, in float, over each row's axes at once (a loop the compiler turns
+    // into vector instructions): sums and sums of squares of the offsets from the sample's first
+    // point, which keep the cancellation of sum_sq - sum^2 / s small. Only the axes' order by
+    // variance is used. Two passes in double took 7% of the instructions of the whole build (graph
+    // included) on 95k music frames.
+    float* const sum = axes_sum_.data();
+    float* const squares = axes_squares_.data();
+    const float* const origin = proj_ + std::size_t{rows[0]} * m_;
+    std::fill(axes_sum_.begin(), axes_sum_.end(), 0.f);
+    std::fill(axes_squares_.begin(), axes_squares_.end(), 0.f);
+    for (std::size_t s = 1; s < sample; ++s) {
+      const float* const x = proj_ + std::size_t{rows[s * count / sample]} * m_;
       for (std::size_t a = 0; a < m_; ++a) {
-        const double dv = coord(row, a) - mean[a];
-        variance_[a] += dv * dv;
+        const float d = x[a] - origin[a];
+        sum[a] += d;
+        squares[a] += d * d;
       }
     }
+    for (std::size_t a = 0; a < m_; ++a)
+      variance_[a] = std::max(0.0, static_cast<double>(squares[a]) -
+                                       static_cast<double>(sum[a]) * sum[a] / static_cast<double>(sample));
     std::iota(axes_.begin(), axes_.end(), std::size_t{0});
     const std::size_t candidates = std::min(params_.candidate_axes, m_);
     std::partial_sort(axes_.begin(), axes_.begin() + static_cast<long>(candidates), axes_.end(),
@@ -138,7 +144,7 @@ class TreeBuilder {
   std::mt19937_64 rng_;
   std::vector<double> variance_;
   std::vector<std::size_t> axes_;
-  std::vector<double> axes_mean_;
+  std::vector<float> axes_sum_, axes_squares_;
 };
 
 /// Whether every coordinate is an integer from 0 to 255 (so that a byte holds it exactly).
