@@ -34,6 +34,7 @@
 
 #include "build_distances.hpp"
 #include "graph_search.hpp"
+#include "key_select.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
 #include "kdspace/points/detail/row_distances.hpp"
@@ -130,35 +131,6 @@ class RowQueries {
   std::vector<std::int16_t> widened_;
 };
 
-/// Moves the `keep` smallest of the distinct keys[0, count) to the front, in any order: a quickselect
-/// whose partition has no branch on the keys (each key is swapped to the front end and the end
-/// moves on when it is below the pivot), so that it does not pay for the mispredicted branches of
-/// std::nth_element on keys in random order: step 1 on 95k music frames took 0.13 s instead of
-/// 0.19 s (one thread, interleaved runs), for more instructions (+85M). Median-of-three pivots.
-inline void select_smallest(std::uint64_t* keys, std::size_t count, std::size_t keep) {
-  // Invariant: keys[0, low) < keys[low, high) < keys[high, count), and low <= keep <= high.
-  std::size_t low = 0, high = count;
-  while (low < keep && keep < high) {
-    const std::size_t mid = low + (high - low) / 2;
-    // The median of three to the end, as the pivot.
-    if (keys[mid] < keys[low]) std::swap(keys[mid], keys[low]);
-    if (keys[high - 1] < keys[mid]) std::swap(keys[high - 1], keys[mid]);
-    if (keys[mid] < keys[low]) std::swap(keys[mid], keys[low]);
-    std::swap(keys[mid], keys[high - 1]);
-    const std::uint64_t pivot = keys[high - 1];
-    std::size_t below = low;
-    for (std::size_t i = low; i + 1 < high; ++i) {
-      const std::uint64_t x = keys[i];
-      keys[i] = keys[below];
-      keys[below] = x;
-      below += x < pivot ? 1 : 0;
-    }
-    std::swap(keys[below], keys[high - 1]);  // the pivot between the two sides
-    if (keep <= below) high = below;
-    else low = below + 1;
-  }
-}
-
 /// Puts the `keep` first of `found` in (distance, row) order at its front. On float distances
 /// (never negative, so their bits order as unsigned integers do) each candidate is sorted as one
 /// 64-bit key, distance bits above the row: one compare instead of two branches (the windows' step
@@ -174,7 +146,7 @@ void select_nearest(std::vector<Candidate<T>>& found, std::size_t keep, std::vec
       keys[i] = std::uint64_t{bits} << 32 | found[i].index;
     }
     select_smallest(keys.data(), count, keep);
-    std::sort(keys.begin(), keys.begin() + static_cast<std::ptrdiff_t>(keep));
+    sort_keys(keys.data(), keep);
     for (std::size_t i = 0; i < keep; ++i) {
       const std::uint32_t bits = static_cast<std::uint32_t>(keys[i] >> 32);
       std::memcpy(&found[i].dist, &bits, sizeof bits);
