@@ -72,7 +72,12 @@ NeighborLists<T> PointForest<T>::knn_exact_batch(const T* queries, std::size_t n
   out.offsets.resize(nq + 1);
   for (std::size_t q = 0; q <= nq; ++q) out.offsets[q] = q * k;
   out.neighbors.resize(nq * k);
-  detail::parallel_for(nq, threads, 64, [&](std::size_t begin, std::size_t end, unsigned) {
+  // One share of the queries a thread: each call of the scan first reads the whole of the points
+  // (its checks and the rows' norms), which in chunks of 64 queries doubled the CPU time of the 400
+  // queries of tune() on 95k music frames (0.018 -> 0.037 s on two threads).
+  const std::size_t workers = detail::resolve_threads(threads);
+  const std::size_t share = std::max<std::size_t>(64, (nq + workers - 1) / workers);
+  detail::parallel_for(nq, threads, share, [&](std::size_t begin, std::size_t end, unsigned) {
     detail::blocked_scan_knn_l2(data, queries + begin * dim_, end - begin, k, out.neighbors.data() + begin * k);
   });
   return out;
