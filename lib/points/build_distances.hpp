@@ -49,8 +49,8 @@ std::vector<std::uint16_t> quantize_rows(const U* rows, std::size_t n, std::size
   std::vector<std::uint16_t> out(n * dim);
   for (std::size_t r = 0; r < n; ++r)
     for (std::size_t a = 0; a < dim; ++a) {
-      const double x = (static_cast<double>(rows[r * dim + a]) - low[a]) * scale;
-      out[r * dim + a] = static_cast<std::uint16_t>(std::clamp(std::round(x), 0.0, top));
+      const double x = (static_cast<double>(rows[r * dim + a]) - low[a]) * scale;  // in [0, top]
+      out[r * dim + a] = static_cast<std::uint16_t>(std::min(x + 0.5, top));      // rounded half up
     }
   return out;
 }
