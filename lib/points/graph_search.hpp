@@ -87,6 +87,7 @@ struct GraphScratch {
   std::uint32_t epoch = 0;
   GraphPool<T> pool;
   std::vector<std::uint32_t> fresh;
+  std::vector<T> fresh_dist;
 
   void start(std::size_t n, std::size_t ef) {
     if (seen.size() != n) seen.assign(n, 0), epoch = 0;
@@ -170,26 +171,28 @@ void graph_search(const NeighborGraph& graph, std::size_t n, const Scorer& score
   const std::uint32_t epoch = s.epoch;
   std::uint64_t scored = 0, expanded = 0;
 
-  // s.fresh[0, fresh_count): the rows to score next.
-  if (s.fresh.size() < std::max(graph.degree, entries.row_count)) s.fresh.resize(std::max(graph.degree, entries.row_count));
+  // s.fresh[0, fresh_count): the rows to score next (with room for a last group's repeats), and
+  // s.fresh_dist their distances.
+  const std::size_t most_fresh = std::max(graph.degree, entries.row_count) + group;
+  if (s.fresh.size() < most_fresh) s.fresh.resize(most_fresh), s.fresh_dist.resize(most_fresh);
   std::uint32_t* const fresh = s.fresh.data();
+  T* const fresh_dist = s.fresh_dist.data();
   std::size_t fresh_count = 0;
 
-  // Scores the fresh rows and offers each to the pool; returns the first position a point entered at.
+  // Scores the fresh rows, then offers each to the pool; returns the first position a point entered
+  // at. Each group is scored against the pool's bound before any of them is offered (which only
+  // lowers it): the offers are one loop over the rows, not one per group whose end depends on how
+  // many rows are fresh (a branch mispredicted once a group).
   auto score_fresh = [&] {
     std::size_t first_entered = pool.size();
     const std::size_t count = fresh_count;
-    for (std::size_t first = 0; first < count; first += group) {
-      std::uint32_t ids[group];
-      for (std::size_t g = 0; g < group; ++g) ids[g] = fresh[std::min(first + g, count - 1)];
-      const T limit = pool.bound();
-      T dist[group];
-      score(ids, limit, dist);
-      for (std::size_t g = 0; g < group && first + g < count; ++g) {
-        if (!(dist[g] <= limit)) continue;  // may be a partial sum: never offered
-        const std::size_t pos = pool.insert(dist[g], ids[g]);
-        first_entered = std::min(first_entered, pos);
-      }
+    const T limit = pool.bound();
+    for (std::size_t i = count; i < count + group; ++i) fresh[i] = fresh[count > 0 ? count - 1 : 0];
+    for (std::size_t first = 0; first < count; first += group) score(fresh + first, limit, fresh_dist + first);
+    for (std::size_t i = 0; i < count; ++i) {
+      if (!(fresh_dist[i] <= limit)) continue;  // may be a partial sum: never offered
+      const std::size_t pos = pool.insert(fresh_dist[i], fresh[i]);
+      first_entered = std::min(first_entered, pos);
     }
     scored += count;
     return first_entered;
