@@ -16,6 +16,7 @@
 #include "kdspace/metric.hpp"
 #include "kdspace/points/point_forest.hpp"
 #include "support.hpp"
+#include "../lib/points/key_select.hpp"
 
 using kdspace::ForestParams;
 using kdspace::ForestSearchParams;
@@ -332,4 +333,30 @@ TEST_CASE("graph: bad parameters get clear errors", "[points][graph][errors]") {
   CHECK_THROWS_WITH(no_graph.knn(pts.data(), 3, graph_search(10)), Catch::Contains("has none"));
   const PointForest<float> forest(pts.data(), 100, 8, with_graph());
   CHECK_THROWS_WITH(forest.knn(pts.data(), 0, graph_search(10)), Catch::Contains("k must be at least 1"));
+}
+
+TEST_CASE("graph: the branch-free selection and sort of keys agree with std::sort", "[points][graph]") {
+  // Distinct keys in random, sorted, reversed and nearly sorted orders, every count from 0 to 140
+  // and every number kept: the kept ones are the smallest, and sort_keys sorts.
+  std::mt19937_64 rng(771);
+  for (std::size_t count = 0; count <= 140; ++count) {
+    std::vector<std::uint64_t> keys(count);
+    for (std::size_t i = 0; i < count; ++i) keys[i] = (rng() & ~std::uint64_t{0xffffffff}) | i;  // distinct
+    std::vector<std::uint64_t> sorted = keys;
+    std::sort(sorted.begin(), sorted.end());
+    for (int order = 0; order < 4; ++order) {
+      std::vector<std::uint64_t> input = order == 0 ? keys : sorted;
+      if (order == 2) std::reverse(input.begin(), input.end());
+      if (order == 3 && count > 2) std::swap(input[count / 3], input[count - 1]);
+      for (std::size_t keep = 0; keep <= count; keep += count > 40 ? 7 : 1) {
+        std::vector<std::uint64_t> work = input;
+        kdspace::detail::select_smallest(work.data(), count, keep);
+        std::sort(work.begin(), work.begin() + static_cast<std::ptrdiff_t>(keep));
+        REQUIRE(std::equal(work.begin(), work.begin() + static_cast<std::ptrdiff_t>(keep), sorted.begin()));
+      }
+      std::vector<std::uint64_t> work = input;
+      kdspace::detail::sort_keys(work.data(), count);
+      REQUIRE(work == sorted);
+    }
+  }
 }
