@@ -109,7 +109,7 @@ def test_graph_search_exact_budget_and_recall():
         true = np.sqrt(((queries[:, None, :].astype(np.float64) - data[i].astype(np.float64)) ** 2).sum(-1))
         np.testing.assert_allclose(d, true, rtol=1e-5)
         recalls.append(kdspace.recall_at_k(d, exact_d))
-    assert recalls[-1] > recalls[0] and recalls[-1] > 0.95
+    assert recalls[-1] >= recalls[0] and recalls[-1] > 0.95  # (ef 10 may already find them all)
     # the same graph whatever the build's thread count
     built_on_all = kdspace.Forest(data, workers=-1)
     np.testing.assert_array_equal(built_on_all.query(queries, k=10, ef=40)[1], forest.query(queries, k=10, ef=40)[1])
