@@ -6,12 +6,11 @@
 // compare those of a copy of the points at a finer grain than their spread: an offset per axis does
 // not change any distance, and one scale for every axis changes all of them by the same factor.
 // The scale puts the widest axis on [0, top] (more than half of it), top chosen so that a squared
-// distance fits in 32 bits (14,654 for 20 coordinates, 10,494 for 39, 2,115 for 960); the rounding then moves a
-// distance by far less than the gaps between a point's neighbours. Against float rows scored 4
-// coordinates a vector, the build over 95k music frames (20-D) took 3% fewer instructions in all
-// (callgrind, net of the 0.08 billion the rounding costs) and about 2% less time, for the same
-// recall at every ef within 0.0005; the copy takes half the memory of float rows while the graph
-// is built.
+// distance fits in 32 bits (14,654 for 20 coordinates, 10,494 for 39, 2,115 for 960); the rounding then moves
+// a distance by far less than the gaps between a point's neighbours. Against float rows scored 4 coordinates
+// a vector, the build over 95k music frames (20-D) took 3% fewer instructions in all (callgrind, net of the
+// 0.08 billion the rounding costs) and about 2% less time, for the same recall at every ef within 0.0005; the
+// copy takes half the memory of float rows while the graph is built.
 #pragma once
 
 #include <algorithm>
@@ -41,7 +40,8 @@ std::vector<std::uint16_t> quantize_rows(const U* rows, std::size_t n, std::size
   double widest = 0;
   for (std::size_t a = 0; a < dim; ++a) widest = std::max(widest, high[a] - low[a]);
   // Each coordinate's difference fits in int16, a pair of squares in int32, a row's sum in uint32.
-  const double top = std::min(32767.0, std::floor(std::sqrt(4294967295.0 / static_cast<double>(std::max<std::size_t>(dim, 1)))));
+  const double top = std::min(
+      32767.0, std::floor(std::sqrt(4294967295.0 / static_cast<double>(std::max<std::size_t>(dim, 1)))));
   // A power of two (at most one bit of resolution lost): integer coordinates then stay integers,
   // every distance is the same multiple of their own (a power of four) and converts to T with the
   // same rounding, so points of integer values get the graph their byte rows get.
@@ -50,7 +50,7 @@ std::vector<std::uint16_t> quantize_rows(const U* rows, std::size_t n, std::size
   for (std::size_t r = 0; r < n; ++r)
     for (std::size_t a = 0; a < dim; ++a) {
       const double x = (static_cast<double>(rows[r * dim + a]) - low[a]) * scale;  // in [0, top]
-      out[r * dim + a] = static_cast<std::uint16_t>(std::min(x + 0.5, top));      // rounded half up
+      out[r * dim + a] = static_cast<std::uint16_t>(std::min(x + 0.5, top));       // rounded half up
     }
   return out;
 }
@@ -125,7 +125,9 @@ class QuantizedRowScorer {
 
  private:
 #if defined(__SSE2__)
-  static __m128i load(const std::uint16_t* p) { return _mm_loadu_si128(reinterpret_cast<const __m128i*>(p)); }
+  static __m128i load(const std::uint16_t* p) {
+    return _mm_loadu_si128(reinterpret_cast<const __m128i*>(p));
+  }
   __m128i tail_mask_;
 #endif
   const std::uint16_t* rows_;

@@ -39,8 +39,10 @@ inline void select_smallest(std::uint64_t* keys, std::size_t count, std::size_t 
   std::size_t low = 0, high = count;
   while (low < keep && keep < high) {
     const std::size_t p = partition_keys(keys, low, high);
-    if (keep <= p) high = p;
-    else low = p + 1;
+    if (keep <= p)
+      high = p;
+    else
+      low = p + 1;
   }
 }
 
