@@ -18,6 +18,7 @@
 
 #include "kdspace/index_pair.hpp"
 #include "kdspace/joins/bounded_tree.hpp"
+#include "kdspace/joins/first_index_buckets.hpp"
 #include "kdspace/joins/join_stats.hpp"
 #include "kdspace/joins/traversal.hpp"
 
@@ -119,11 +120,11 @@ class RangeRule {
 /// Keeps index pairs; in a self-join each as (smaller index, larger index).
 class PairSink {
  public:
-  PairSink(std::vector<IndexPair>& out, bool self) : out_(out), self_(self) {}
+  PairSink(FirstIndexBuckets<IndexPair>& out, bool self) : out_(out), self_(self) {}
 
   template <class T>
   void add(std::uint32_t a, std::uint32_t b, T) {
-    out_.push_back(self_ && b < a ? IndexPair{b, a} : IndexPair{a, b});
+    out_.add(self_ && b < a ? IndexPair{b, a} : IndexPair{a, b});
   }
 
   /// Query point at position i with reference positions [first, last): no distance needed.
@@ -135,7 +136,7 @@ class PairSink {
   }
 
  private:
-  std::vector<IndexPair>& out_;
+  FirstIndexBuckets<IndexPair>& out_;
   bool self_;
 };
 
@@ -143,10 +144,10 @@ class PairSink {
 template <class T>
 class DistanceSink {
  public:
-  DistanceSink(std::vector<FoundPair<T>>& out, bool self) : out_(out), self_(self) {}
+  DistanceSink(FirstIndexBuckets<FoundPair<T>>& out, bool self) : out_(out), self_(self) {}
 
   void add(std::uint32_t a, std::uint32_t b, T dist) {
-    out_.push_back(self_ && b < a ? FoundPair<T>{b, a, dist} : FoundPair<T>{a, b, dist});
+    out_.add(self_ && b < a ? FoundPair<T>{b, a, dist} : FoundPair<T>{a, b, dist});
   }
 
   template <class Tree, class Space>
@@ -159,7 +160,7 @@ class DistanceSink {
   }
 
  private:
-  std::vector<FoundPair<T>>& out_;
+  FirstIndexBuckets<FoundPair<T>>& out_;
   bool self_;
 };
 

@@ -15,6 +15,7 @@
 #include "kdspace/index_pair.hpp"
 #include "kdspace/joins/bounded_tree.hpp"
 #include "kdspace/joins/count_rule.hpp"
+#include "kdspace/joins/first_index_buckets.hpp"
 #include "kdspace/joins/join_stats.hpp"
 #include "kdspace/joins/knn_rule.hpp"
 #include "kdspace/joins/range_rule.hpp"
@@ -29,13 +30,14 @@ namespace kdspace::detail {
 /// costs little beside its work.
 inline std::size_t task_points(std::size_t queries) { return std::max<std::size_t>(4096, queries / 256); }
 
-/// Runs body(task, root, stats) for each query subtree on `threads` threads; sums the stats.
+/// Runs body(task, root, stats, worker) for each query subtree on `threads` threads (worker: the
+/// thread's number, below resolve_threads(threads)); sums the stats.
 template <class Tree, class Body>
 void for_each_task(const Tree& queries, unsigned threads, JoinStats* stats, Body&& body) {
   const std::vector<std::uint32_t> roots = task_roots(queries, task_points(queries.size()));
   std::vector<JoinStats> per_task(roots.size());
-  parallel_for(roots.size(), threads, 1, [&](std::size_t begin, std::size_t end, unsigned) {
-    for (std::size_t t = begin; t < end; ++t) body(t, roots[t], per_task[t]);
+  parallel_for(roots.size(), threads, 1, [&](std::size_t begin, std::size_t end, unsigned worker) {
+    for (std::size_t t = begin; t < end; ++t) body(t, roots[t], per_task[t], worker);
   });
   if (stats)
     for (const auto& s : per_task) *stats += s;
@@ -49,7 +51,7 @@ NeighborLists<T> knn_join_trees(const BoundedTree<T, Dim>& queries, const Bounde
   KnnTable<T> table(queries.size(), k);
   std::vector<T> node_bound(queries.node_count(), std::numeric_limits<T>::infinity());
   using Rule = KnnRule<T, Dim, Space>;
-  for_each_task(queries, threads, stats, [&](std::size_t, std::uint32_t root, JoinStats& task_stats) {
+  for_each_task(queries, threads, stats, [&](std::size_t, std::uint32_t root, JoinStats& task_stats, unsigned) {
     Rule rule(queries, reference, space, self, table, node_bound, task_stats);
     DualTraversal<Rule>(rule, task_stats).run(root, 0, {});
   });
@@ -80,71 +82,20 @@ struct NearestFirst {
   }
 };
 
-/// The records of all tasks with fields a < n_a, ordered by a, then by less_within_a.
-///
-/// Two counting passes that work within the cache: the first moves the records into up to 1024
-/// buckets of consecutive a (1024 write streams, straight from the tasks' vectors, each freed once
-/// moved), the second orders each bucket by a, with a table of counts as wide as a bucket, into its
-/// place in the result; then each run of equal a, as short as one point's pairs, is sorted. (One
-/// counting pass over all of a writes every record to a random place of the result and updates a
-/// table of n_a counts at random. Perf samples in the ordering, 1e6 uniform 3-D points, 4.8e6
-/// pairs: counting sorts by b then by a 1122, by a alone 875-953, by buckets 795-813.)
-template <class Record, class Less>
-std::vector<Record> sort_by_first_index(std::vector<std::vector<Record>>& per_task, std::size_t n_a,
-                                        Less&& less_within_a) {
-  constexpr std::size_t max_buckets = 1024;
-  unsigned shift = 0;
-  while ((n_a >> shift) >= max_buckets) ++shift;
-  const std::size_t buckets = (n_a >> shift) + 1, width = std::size_t{1} << shift;
-  std::vector<std::size_t> bucket_next(buckets + 1, 0);
-  for (const auto& records : per_task)
-    for (const Record& r : records) ++bucket_next[(std::size_t{r.a} >> shift) + 1];
-  for (std::size_t k = 0; k < buckets; ++k) bucket_next[k + 1] += bucket_next[k];
-  const std::size_t total = bucket_next[buckets];
-  std::vector<Record> by_bucket(total);
-  for (auto& records : per_task) {
-    for (const Record& r : records) by_bucket[bucket_next[std::size_t{r.a} >> shift]++] = r;
-    std::vector<Record>().swap(records);
-  }
-  // Now bucket_next[k] is where bucket k ends.
-  std::vector<Record> sorted(total);
-  std::vector<std::size_t> next(width + 1);
-  std::size_t bucket_begin = 0;
-  for (std::size_t k = 0; k < buckets; ++k) {
-    const std::size_t bucket_end = bucket_next[k], first_a = k << shift;
-    std::fill(next.begin(), next.end(), std::size_t{0});
-    for (std::size_t i = bucket_begin; i < bucket_end; ++i) ++next[by_bucket[i].a - first_a + 1];
-    next[0] = bucket_begin;
-    for (std::size_t a = 0; a < width; ++a) next[a + 1] += next[a];
-    for (std::size_t i = bucket_begin; i < bucket_end; ++i) sorted[next[by_bucket[i].a - first_a]++] = by_bucket[i];
-    // Now next[a] is where the run of first_a + a ends (and that of the next a begins).
-    std::size_t begin = bucket_begin;
-    for (std::size_t a = 0; a < width; ++a) {
-      const std::size_t end = next[a];
-      if (end - begin > 1)
-        std::sort(sorted.begin() + static_cast<std::ptrdiff_t>(begin), sorted.begin() + static_cast<std::ptrdiff_t>(end),
-                  less_within_a);
-      begin = end;
-    }
-    bucket_begin = bucket_end;
-  }
-  return sorted;
-}
-
 /// Every pair within `limit` (internal units), through a sink of type Sink (PairSink or
 /// DistanceSink), ordered by a, then by less_within_a.
 template <class Sink, class Found, class T, int Dim, class Space, class Less>
 std::vector<Found> range_join_trees(const BoundedTree<T, Dim>& queries, const BoundedTree<T, Dim>& reference, T limit,
                                     bool self, const Space& space, unsigned threads, JoinStats* stats,
                                     Less&& less_within_a) {
-  std::vector<std::vector<Found>> per_task(task_roots(queries, task_points(queries.size())).size());
+  std::vector<FirstIndexBuckets<Found>> per_worker(resolve_threads(threads), FirstIndexBuckets<Found>(queries.size()));
   using Rule = RangeRule<T, Dim, Space, Sink>;
-  for_each_task(queries, threads, stats, [&](std::size_t task, std::uint32_t root, JoinStats& task_stats) {
-    Sink sink(per_task[task], self);
+  for_each_task(queries, threads, stats, [&](std::size_t, std::uint32_t root, JoinStats& task_stats, unsigned worker) {
+    Sink sink(per_worker[worker], self);
     Rule rule(queries, reference, space, self, limit, sink, task_stats);
     DualTraversal<Rule>(rule, task_stats).run(root, 0, {});
   });
-  return sort_by_first_index(per_task, queries.size(), less_within_a);
+  return sort_by_first_index(per_worker, less_within_a);
 }
 
 /// Bin counts of every pair (Count = std::uint64_t) or of their weights (Count = double) over the
@@ -156,7 +107,7 @@ std::vector<Count> count_join_trees(const BoundedTree<T, Dim>& queries, const Bo
   std::vector<std::vector<Count>> per_task(task_roots(queries, task_points(queries.size())).size(),
                                            std::vector<Count>(radii.size(), Count(0)));
   using Rule = CountRule<T, Dim, Space, Count>;
-  for_each_task(queries, threads, stats, [&](std::size_t task, std::uint32_t root, JoinStats& task_stats) {
+  for_each_task(queries, threads, stats, [&](std::size_t task, std::uint32_t root, JoinStats& task_stats, unsigned) {
     Rule rule(queries, reference, space, self, radii, query_weights, reference_weights, per_task[task], task_stats);
     DualTraversal<Rule>(rule, task_stats).run(root, 0, rule.all_bins());
   });
