@@ -41,7 +41,8 @@ class BoxRule {
   bool rescore(std::uint32_t, std::uint32_t, T) const { return true; }
   void query_done(std::uint32_t) {}
 
-  void base_case(std::uint32_t, std::uint32_t r, const Context&) {
+  template <class Isa>
+  void base_case(std::uint32_t, std::uint32_t r, const Context&, Isa) {
     const auto& leaf = reference_.node(r);
     for (std::uint32_t j = leaf.begin; j < leaf.end; ++j)
       if (inside(reference_.point(j))) found_.push_back(reference_.index(j));

@@ -110,7 +110,8 @@ class CountRule {
   bool rescore(std::uint32_t, std::uint32_t, T) const { return true; }
   void query_done(std::uint32_t) {}
 
-  void base_case(std::uint32_t q, std::uint32_t r, const Context& context) {
+  template <class Isa>
+  void base_case(std::uint32_t q, std::uint32_t r, const Context& context, Isa) {
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
     // Pairs beyond the last radius fall in no count: the leaves bin only up to it.
@@ -119,19 +120,19 @@ class CountRule {
     if constexpr (std::is_same_v<Count, std::uint64_t>)
       std::fill(within_.begin() + context.lo, within_.begin() + hi + 1, 0);
     const auto limits = same_limit<T, Tree::column_block>(largest);
-    points_near_box(
+    points_near_box<Isa>(
         queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t) { return limits.data(); },
         [&](std::uint32_t i) {
           const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
           stats_.distances += rn.end - first;
           if constexpr (std::is_same_v<Count, double>) {
-            distances_to_leaf(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
+            distances_to_leaf<Isa>(reference_, r, first, queries_.point(i), space_, largest, [&](std::uint32_t j, T d) {
               bins_[first_at_least(context.lo, hi, d)] +=
                   query_weights_->by_position[i] * reference_weights_->by_position[j];
             });
           } else {
             distance_blocks(reference_, r, first, queries_.point(i), space_,
-                            [&](const auto& dist, unsigned keep, std::uint32_t) { count_block(dist, keep, context.lo, hi); });
+                            [&](const auto& dist, unsigned keep, std::uint32_t) { count_block<Isa>(dist, keep, context.lo, hi); });
           }
         });
     if constexpr (std::is_same_v<Count, std::uint64_t>) {
@@ -158,14 +159,14 @@ class CountRule {
   // Adds to within_[j], for j in [lo, hi], the distances of a block (those marked in `keep`) that
   // are at most radius j: one vector comparison per radius, instead of a search per pair; once a
   // radius holds every pair of the block left, so do the larger ones.
-  template <class Block>
+  template <class Isa, class Block>
   void count_block(const Block& dist, unsigned keep, std::uint32_t lo, std::uint32_t hi) {
-    const unsigned inside = at_most(dist, radii_[hi]) & keep;
+    const unsigned inside = at_most(dist, radii_[hi], Isa{}) & keep;
     if (!inside) return;
     const std::uint64_t all = bits_set(inside);
     std::uint32_t j = lo;
     for (; j < hi; ++j) {
-      const unsigned near = at_most(dist, radii_[j]) & inside;
+      const unsigned near = at_most(dist, radii_[j], Isa{}) & inside;
       within_[j] += bits_set(near);
       if (near == inside) break;
     }

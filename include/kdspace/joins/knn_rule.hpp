@@ -125,7 +125,8 @@ class KnnRule {
 
   bool rescore(std::uint32_t q, std::uint32_t, T key) const { return !(key > node_bound_[q]); }
 
-  void base_case(std::uint32_t q, std::uint32_t r, const Context&) {
+  template <class Isa>
+  void base_case(std::uint32_t q, std::uint32_t r, const Context&, Isa) {
     const auto& qn = queries_.node(q);
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
@@ -139,7 +140,7 @@ class KnnRule {
       for (std::uint32_t j = 0; base + j < qn.end; ++j) last_block[j] = table_.kth(base + j);
       return static_cast<const T*>(last_block.data());
     };
-    points_near_box(
+    points_near_box<Isa>(
         queries_, q, reference_.lo(r), reference_.hi(r), space_, limits, [&](std::uint32_t i) {
           const T* a = queries_.point(i);
           if (rn.all_identical) {
@@ -148,7 +149,7 @@ class KnnRule {
           }
           T kth = table_.kth(i);
           stats_.distances += rn.count();
-          distances_to_leaf(reference_, r, rn.begin, a, space_, kth, [&](std::uint32_t j, T d) {
+          distances_to_leaf<Isa>(reference_, r, rn.begin, a, space_, kth, [&](std::uint32_t j, T d) {
             if (d <= kth && !(same_leaf && j == i) && table_.offer(i, d, reference_.index(j))) kth = table_.kth(i);
           });
         });

@@ -80,17 +80,18 @@ class RangeRule {
   bool rescore(std::uint32_t, std::uint32_t, T) const { return true; }
   void query_done(std::uint32_t) {}
 
-  void base_case(std::uint32_t q, std::uint32_t r, const Context&) {
+  template <class Isa>
+  void base_case(std::uint32_t q, std::uint32_t r, const Context&, Isa) {
     const auto& rn = reference_.node(r);
     const bool same_leaf = self_ && q == r;
     const auto limits = same_limit<T, Tree::column_block>(limit_);
-    points_near_box(
+    points_near_box<Isa>(
         queries_, q, reference_.lo(r), reference_.hi(r), space_, [&](std::uint32_t) { return limits.data(); },
         [&](std::uint32_t i) {
           const std::uint32_t first = same_leaf ? i + 1 : rn.begin;
           const std::uint32_t a_index = queries_.index(i);
           stats_.distances += rn.end - first;
-          distances_to_leaf(reference_, r, first, queries_.point(i), space_, limit_,
+          distances_to_leaf<Isa>(reference_, r, first, queries_.point(i), space_, limit_,
                             [&](std::uint32_t j, T d) { sink_.add(a_index, reference_.index(j), d); });
         });
   }

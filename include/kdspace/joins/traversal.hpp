@@ -8,7 +8,8 @@
 //                              descendants inherit (the radii still undecided, for counting)
 //   rescore(q, r, key)      -> whether a pair scored earlier is still worth visiting (a k-NN bound
 //                              may have shrunk while its sibling was visited)
-//   base_case(q, r, context)   two leaves: compare their points
+//   base_case(q, r, context, isa)  two leaves: compare their points (isa: the instruction set the
+//                              base case is compiled for, BaselineIsa or Avx2Isa)
 //   query_done(q)              both children of query node q are done (k-NN: refresh q's bound)
 //   nearest_first              visit the nearer reference child first (k-NN) or in tree order
 //
@@ -31,13 +32,24 @@
 #endif
 
 #include "kdspace/detail/avx2_dispatch.hpp"
+#if defined(KDSPACE_AVX2_DISPATCH)
+#include <immintrin.h>
+#endif
 #include "kdspace/joins/join_stats.hpp"
 
 // The leaf-pair base cases run in their AVX2 compilation where the processor has it
 // (avx2_dispatch.hpp): the loops over a block of 8 points (space.hpp's distances and lower bounds)
-// then take 4 doubles or 8 floats per instruction rather than 2 or 4, with the same answers.
+// then take 4 doubles or 8 floats per instruction rather than 2 or 4, with the same answers. The
+// rules' base cases are given the instruction set they are compiled for (BaselineIsa, Avx2Isa), and
+// pass it to the block comparisons (at_most, not_above_each), whose AVX2 forms compare a block of 8
+// doubles in two 256-bit registers rather than four 128-bit ones (the compiler does not widen the
+// SSE2 intrinsics by itself).
 
 namespace kdspace::detail {
+
+/// The instruction set a base case is compiled for: the baseline, or AVX2 inside with_avx2.
+struct BaselineIsa {};
+struct Avx2Isa {};
 
 template <class T, class Context>
 struct JoinScore {
@@ -95,11 +107,11 @@ class DualTraversal {
   void base_case(std::uint32_t q, std::uint32_t r, const Context& context) {
 #if defined(KDSPACE_AVX2_DISPATCH)
     if (avx2_) {
-      with_avx2([&] { rule_.base_case(q, r, context); });
+      with_avx2([&] { rule_.base_case(q, r, context, Avx2Isa{}); });
       return;
     }
 #endif
-    rule_.base_case(q, r, context);
+    rule_.base_case(q, r, context, BaselineIsa{});
   }
 
   // Scores (q, both children of rn) and visits them, the nearer first when the rule asks.
@@ -167,6 +179,56 @@ unsigned not_above_each(const std::array<T, N>& values, const T* limits) {
   return bits;
 }
 
+template <class T, std::size_t N>
+unsigned at_most(const std::array<T, N>& values, T limit, BaselineIsa) {
+  return at_most(values, limit);
+}
+template <class T, std::size_t N>
+unsigned not_above_each(const std::array<T, N>& values, const T* limits, BaselineIsa) {
+  return not_above_each(values, limits);
+}
+
+#if defined(KDSPACE_AVX2_DISPATCH)
+/// at_most and not_above_each in AVX2: the same comparisons (the same predicates, NaN included),
+/// 4 doubles or 8 floats each.
+template <class T, std::size_t N>
+__attribute__((target("avx2"))) unsigned at_most(const std::array<T, N>& values, T limit, Avx2Isa) {
+  unsigned bits = 0;
+  if constexpr (std::is_same_v<T, double> && N % 4 == 0) {
+    const __m256d bound = _mm256_set1_pd(limit);
+    for (std::size_t j = 0; j < N; j += 4)
+      bits |= static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(_mm256_loadu_pd(values.data() + j), bound, _CMP_LE_OS)))
+              << j;
+    return bits;
+  } else if constexpr (std::is_same_v<T, float> && N % 8 == 0) {
+    const __m256 bound = _mm256_set1_ps(limit);
+    for (std::size_t j = 0; j < N; j += 8)
+      bits |= static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(_mm256_loadu_ps(values.data() + j), bound, _CMP_LE_OS)))
+              << j;
+    return bits;
+  }
+  return at_most(values, limit);
+}
+template <class T, std::size_t N>
+__attribute__((target("avx2"))) unsigned not_above_each(const std::array<T, N>& values, const T* limits, Avx2Isa) {
+  unsigned bits = 0;
+  if constexpr (std::is_same_v<T, double> && N % 4 == 0) {
+    for (std::size_t j = 0; j < N; j += 4)
+      bits |= static_cast<unsigned>(_mm256_movemask_pd(
+                  _mm256_cmp_pd(_mm256_loadu_pd(values.data() + j), _mm256_loadu_pd(limits + j), _CMP_NGT_US)))
+              << j;
+    return bits;
+  } else if constexpr (std::is_same_v<T, float> && N % 8 == 0) {
+    for (std::size_t j = 0; j < N; j += 8)
+      bits |= static_cast<unsigned>(_mm256_movemask_ps(
+                  _mm256_cmp_ps(_mm256_loadu_ps(values.data() + j), _mm256_loadu_ps(limits + j), _CMP_NGT_US)))
+              << j;
+    return bits;
+  }
+  return not_above_each(values, limits);
+}
+#endif
+
 /// The lowest set bit's position, and that bit cleared.
 inline unsigned take_lowest_bit(unsigned& bits) {
 #if defined(__GNUC__)
@@ -201,11 +263,11 @@ void distance_blocks(const Tree& reference, std::uint32_t id, std::uint32_t firs
 
 /// distance_blocks, point by point: visit(position, distance) for the points at most `limit`
 /// (re-read before each block: a k-NN join lowers it as it goes), in order.
-template <class Tree, class Space, class T, class Visit>
+template <class Isa, class Tree, class Space, class T, class Visit>
 void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
                        const T& limit, Visit&& visit) {
   distance_blocks(reference, id, first, a, space, [&](const auto& dist, unsigned keep, std::uint32_t base) {
-    unsigned near = at_most(dist, limit) & keep;
+    unsigned near = at_most(dist, limit, Isa{}) & keep;
     while (near) {
       const unsigned j = take_lowest_bit(near);
       visit(base + j, dist[j]);
@@ -229,7 +291,7 @@ inline unsigned bits_set(unsigned bits) {
 /// limits(base) points to the limits of the block of points from position `base`. The bounds are
 /// worked out a block of points at a time from the leaf's columns and compared by one mask for the
 /// block (which points pass is not predictable: a branch per point would often be mispredicted).
-template <class Tree, class Space, class T, class Limits, class Visit>
+template <class Isa, class Tree, class Space, class T, class Limits, class Visit>
 void points_near_box(const Tree& queries, std::uint32_t id, const T* lo, const T* hi, const Space& space,
                      Limits&& limits, Visit&& visit) {
   constexpr std::size_t block = Tree::column_block;
@@ -240,7 +302,7 @@ void points_near_box(const Tree& queries, std::uint32_t id, const T* lo, const T
     const std::array<T, block> bound = space.template lower_many<block>(columns + start, stride, lo, hi, queries.dim());
     const std::size_t count = std::min<std::size_t>(block, leaf.count() - start);
     const std::uint32_t base = leaf.begin + static_cast<std::uint32_t>(start);
-    unsigned near = not_above_each(bound, limits(base)) & ((1u << count) - 1);
+    unsigned near = not_above_each(bound, limits(base), Isa{}) & ((1u << count) - 1);
     while (near) visit(base + take_lowest_bit(near));
   }
 }
