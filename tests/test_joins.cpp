@@ -276,6 +276,51 @@ TEST_CASE("joins: the base cases on 3-D trees equal brute force", "[joins][exact
   }
 }
 
+// A few thousand points: the found pairs go to buckets of several first indices each, and the runs
+// of one point's pairs are put in order by insertion (a few pairs) or by std::sort (duplicates, all
+// identical); radii exactly at nearest-neighbour distances and one step either side.
+template <class T>
+void check_pairs_in_order(Shape shape, bool periodic, std::uint32_t seed) {
+  const std::size_t n = 2100, dim = 3;
+  CAPTURE(kdspace_test::name(shape), periodic, kdspace_test::type_name<T>());
+  const Torus<T> space(boxsize_for<T>(shape, dim, periodic), dim);
+  std::vector<T> points = make_points<T>(shape, n, dim, seed);
+  space.wrap(points);
+  const PointTree<T> tree(points.data(), n, dim);
+  const auto table = DistanceTable<T>::template make<kdspace::L2>(space, points, points);
+  std::vector<T> radii;
+  for (std::size_t i : {std::size_t{0}, n / 2, n - 1}) {
+    T nearest = std::numeric_limits<T>::infinity();
+    for (std::size_t j = 0; j < n; ++j)
+      if (j != i) nearest = std::min(nearest, table.at(i, j));
+    const T d = kdspace::L2::to_distance(nearest);
+    radii.insert(radii.end(), {d, std::nextafter(d, T(0)), std::nextafter(d, std::numeric_limits<T>::infinity())});
+  }
+  std::sort(radii.begin(), radii.end());
+  radii.erase(std::unique(radii.begin(), radii.end()), radii.end());
+  for (unsigned threads : {1u, 3u}) {
+    JoinParams params;
+    params.threads = threads;
+    params.boxsize = space.boxsize;
+    for (const T r : radii) {
+      CAPTURE(threads, r);
+      const auto want = brute_pairs<kdspace::L2>(table, true, r);
+      REQUIRE(kdspace::distances_within(tree, r, params) == want);
+      REQUIRE(kdspace::pairs_within(tree, r, params) == indices_of(want));
+    }
+  }
+}
+
+TEST_CASE("joins: pairs of a few thousand points come in order, at and around exact distances", "[joins][exact]") {
+  std::uint32_t seed = 700;
+  for (const Shape shape : {Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid, Shape::identical,
+                            Shape::sorted_x}) {
+    check_pairs_in_order<float>(shape, false, seed++);
+    check_pairs_in_order<double>(shape, false, seed++);
+    check_pairs_in_order<double>(shape, true, seed++);
+  }
+}
+
 TEST_CASE("joins: L1 and Linf joins equal brute force flat and periodic", "[joins][exact][periodic]") {
   std::uint32_t seed = 200;
   for (const Case& c : {cases[1], cases[3], cases[4], cases[8]}) {
