@@ -99,4 +99,50 @@ TEST_CASE(
           CHECK(differs_from_heap(results, k, limit, stream) == "");
         }
 }
+
+TEST_CASE(
+    "result sets: ChunkedKnnResults filled with a first leaf at once, then offered the rest, keeps the heap's "
+    "candidates",
+    "[points][result_sets]") {
+  using kdspace::detail::ChunkedKnnResults;
+  std::mt19937 rng(13);
+  for (std::size_t k = ChunkedKnnResults::min_k; k <= ChunkedKnnResults::max_k; ++k)
+    for (int values : {1, 3, 20, 1000})
+      for (float limit : {std::numeric_limits<float>::infinity(), 2.0f})
+        for (std::size_t m : {std::size_t{1}, k - 1, k, k + 1, std::size_t{24}, ChunkedKnnResults::max_fill}) {
+          const auto stream = make_stream(m + 3 * k, values, rng);
+          std::vector<float> dist(m);
+          std::vector<std::uint32_t> index(m);
+          for (std::size_t i = 0; i < m; ++i) dist[i] = stream[i].dist, index[i] = stream[i].index;
+          std::vector<Candidate<float>> storage;
+          ChunkedKnnResults results(k, limit, storage);
+          results.fill(dist.data(), index.data(), m);
+          // The heap is offered the whole stream; the set, the part after the fill.
+          std::vector<Candidate<float>> heap_storage;
+          KnnResults<float> heap(k, limit, heap_storage);
+          for (std::size_t i = 0; i < m; ++i) heap.offer(stream[i].dist, stream[i].index);
+          INFO("k " << k << ", " << values << " values, limit " << limit << ", " << m << " filled");
+          CHECK(results.bound() == heap.bound());
+          CHECK(results.full() == heap.full());
+          const std::vector<Candidate<float>> rest(stream.begin() + static_cast<long>(m), stream.end());
+          // After the fill the set answers every further offer as a heap holding the same kept does.
+          const std::vector<Candidate<float>> kept_by_heap(heap.sorted());
+          std::vector<Candidate<float>> continued_storage;
+          KnnResults<float> continued(k, limit, continued_storage);
+          for (const auto& c : kept_by_heap) continued.offer(c.dist, c.index);
+          for (std::size_t i = 0; i < rest.size(); ++i) {
+            const bool kept = results.offer(rest[i].dist, rest[i].index);
+            const bool heap_kept = continued.offer(rest[i].dist, rest[i].index);
+            CHECK(kept == heap_kept);
+            CHECK(results.bound() == continued.bound());
+          }
+          const auto& got = results.sorted();
+          const auto& want = continued.sorted();
+          REQUIRE(got.size() == want.size());
+          for (std::size_t j = 0; j < got.size(); ++j) {
+            CHECK(got[j].dist == want[j].dist);
+            CHECK(got[j].index == want[j].index);
+          }
+        }
+}
 #endif

@@ -494,6 +494,14 @@ class PointTree {
       return;
     }
     ctx.points_visited += count;
+    if constexpr (detail::fills_at_once<Results>) {
+      if (results.empty() && count <= Results::max_fill) {
+        T dist[Results::max_fill];
+        for (std::size_t i = 0; i < count; ++i, p += d) dist[i] = internal_distance(metric_, ctx.q, p, d);
+        results.fill(dist, order_.data() + first, count);
+        return;
+      }
+    }
     // Most points are farther than the k-th kept: a comparison with the bound turns them away before
     // the result set (and the original index) is touched. A tie with the bound may still enter.
     T worst = results.bound();
