@@ -101,15 +101,16 @@ TEST_CASE(
 }
 
 TEST_CASE(
-    "result sets: ChunkedKnnResults filled with a first leaf at once, then offered the rest, keeps the heap's "
-    "candidates",
+    "result sets: ChunkedKnnResults filled with a first leaf at once, then offered the rest, keeps the "
+    "heap's candidates",
     "[points][result_sets]") {
   using kdspace::detail::ChunkedKnnResults;
   std::mt19937 rng(13);
   for (std::size_t k = ChunkedKnnResults::min_k; k <= ChunkedKnnResults::max_k; ++k)
     for (int values : {1, 3, 20, 1000})
       for (float limit : {std::numeric_limits<float>::infinity(), 2.0f})
-        for (std::size_t m : {std::size_t{1}, k - 1, k, k + 1, std::size_t{24}, ChunkedKnnResults::max_fill}) {
+        for (std::size_t m :
+             {std::size_t{1}, k - 1, k, k + 1, std::size_t{24}, ChunkedKnnResults::max_fill}) {
           const auto stream = make_stream(m + 3 * k, values, rng);
           std::vector<float> dist(m);
           std::vector<std::uint32_t> index(m);

@@ -166,9 +166,7 @@ class ChunkedKnnResults {
     for (std::size_t c = 0; c < chunks_; ++c) {
       const __m128 kd = _mm_load_ps(dist_ + 4 * c);
       const __m128i ki = _mm_load_si128(reinterpret_cast<const __m128i*>(index_ + 4 * c));
-      const __m128i before = _mm_or_si128(
-          _mm_castps_si128(_mm_cmplt_ps(kd, d)),
-          _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(kd, d)), _mm_cmplt_epi32(ki, i)));
+      const __m128i before = comes_before_lanes(kd, ki, d, i);
       count = _mm_sub_epi32(count, _mm_and_si128(before, valid_[c]));  // -(-1) per lane before
     }
     count = _mm_add_epi32(count, _mm_shuffle_epi32(count, _MM_SHUFFLE(1, 0, 3, 2)));
@@ -225,13 +223,12 @@ class ChunkedKnnResults {
       for (std::size_t c = 0; c < chunks; ++c) {
         const __m128 cd = _mm_load_ps(d + 4 * c);
         const __m128i ci = _mm_load_si128(reinterpret_cast<const __m128i*>(i + 4 * c));
-        const __m128i before = _mm_or_si128(_mm_castps_si128(_mm_cmplt_ps(od, cd)),
-                                            _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(od, cd)), _mm_cmplt_epi32(oi, ci)));
-        place[c] = _mm_sub_epi32(place[c], before);
+        place[c] = _mm_sub_epi32(place[c], comes_before_lanes(od, oi, cd, ci));
       }
     }
     alignas(16) std::int32_t places[max_fill];
-    for (std::size_t c = 0; c < chunks; ++c) _mm_store_si128(reinterpret_cast<__m128i*>(places + 4 * c), place[c]);
+    for (std::size_t c = 0; c < chunks; ++c)
+      _mm_store_si128(reinterpret_cast<__m128i*>(places + 4 * c), place[c]);
     const float limit = bound_;
     std::size_t kept = 0;
     for (std::size_t j = 0; j < m; ++j) {
@@ -256,6 +253,12 @@ class ChunkedKnnResults {
  private:
   // Indices compared as signed 32-bit integers (SSE2 has no unsigned comparison): biased by 2^31.
   static std::int32_t biased(std::uint32_t index) { return static_cast<std::int32_t>(index ^ 0x80000000u); }
+  // All ones in the lanes where (a_dist, a_index) comes before (b_dist, b_index): the tie rule, 4 lanes.
+  static __m128i comes_before_lanes(__m128 a_dist, __m128i a_index, __m128 b_dist, __m128i b_index) {
+    return _mm_or_si128(
+        _mm_castps_si128(_mm_cmplt_ps(a_dist, b_dist)),
+        _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(a_dist, b_dist)), _mm_cmplt_epi32(a_index, b_index)));
+  }
   static __m128i select(__m128i mask, __m128i a, __m128i b) {
     return _mm_or_si128(_mm_and_si128(mask, a), _mm_andnot_si128(mask, b));
   }
