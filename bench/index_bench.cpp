@@ -7,8 +7,8 @@
 //     hits), else the exit status is 1. Loads read a file that was just written, so from the page
 //     cache (warm), as an index kept on a server is. Then where a mapped load's time goes, each part
 //     alone (min of the repetitions): opening and mapping, every checksum (one thread), the
-//     structural checks of the kind's loader (two threads for a large point tree, one for the
-//     others), and reading the mapped bytes once (one thread: the floor).
+//     structural checks of the kind's loader (two threads for a large point tree or box tree, one
+//     for a forest), and reading the mapped bytes once (one thread: the floor).
 //  2. Updates. 1e6 uniform 3-D points, then churn: 500,000 random points removed one at a time and
 //     500,000 new ones inserted, half one at a time and half in batches of 1,000, interleaved across
 //     libraries in rounds of 50,000 operations: kdspace's DynamicPointTree, nanoflann's
@@ -272,10 +272,11 @@ void part_load(std::size_t scale, int reps, const std::string& dir) {
                 r.same ? "yes" : "NO");
   std::printf(
       "\nWhere a mapped load's time goes: each part alone (min of %d), on one thread but for a large point\n"
-      "tree's structural checks, which walk two halves of it on two threads. A point tree's load\n"
-      "checksums the points in those walks, just before it checks them, and the other sections in\n"
-      "chunks that both threads share; other kinds check the structure on one thread while a second\n"
-      "takes the checksums, and share what is left.\n\n",
+      "tree's or box tree's structural checks, which run on two threads. Their loads checksum the\n"
+      "arrays those threads read front to back (a point tree's nodes, points and order; a box tree's\n"
+      "boxes, references and leaf blocks) just before they check them, and the other sections in\n"
+      "chunks that both threads share; a forest checks its structure on one thread while a second\n"
+      "takes the checksums, and both share what is left.\n\n",
       reps);
   std::printf(
       "| index | open and map ms | checksums ms | structural checks ms | read every mapped byte ms (floor) "

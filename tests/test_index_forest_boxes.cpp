@@ -2,11 +2,13 @@
 // the same answers; every changed byte is a clear error; resealed changes never make a query read out
 // of bounds (ASan runs these too).
 #include <catch2/catch.hpp>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <random>
 #include <string>
 #include <utility>
@@ -381,6 +383,85 @@ TEST_CASE("index: box tree parts: padding, order, blocks and depth are checked",
     for (int a = 0; a < 3; ++a) block.plane[a][lane] = 0, block.plane[3 + a][lane] = 1;
   deep.blocks = kdspace::detail::Storage<kdspace::LeafBlock>(std::vector<kdspace::LeafBlock>{block});
   REQUIRE_THROWS_WITH(BoxTree(std::move(deep)), Catch::Contains("deeper than 64"));
+}
+
+TEST_CASE("index: a large box tree, checked on two threads, names each problem as the one-thread check does",
+          "[index][boxes][errors][threads]") {
+  // Enough references for the two-thread check (2^16 or more): a problem in the first leaf, in the
+  // leaves on either side of the middle of the node array (where the second thread starts) and in the
+  // last leaf is named with its leaf, as the one-thread check names it; and so are a box outside the
+  // bounds or not finite, at either end, and a box in no leaf.
+  const auto boxes = kdspace::generate_boxes(40000, kdspace::SceneKind::uniform, 7);
+  const BoxTree tree(boxes);
+  REQUIRE(tree.parts().references.size() >= (std::size_t{1} << 16));
+  const BoxTree again(owned_parts(tree));
+  REQUIRE(again.nodes() == tree.nodes());
+  REQUIRE(again.stats().depth == tree.stats().depth);
+  REQUIRE(again.stats().sah_cost == tree.stats().sah_cost);
+
+  const auto& nodes = tree.nodes();
+  std::vector<std::size_t> leaves;  // non-empty leaves, in node order
+  for (std::size_t i = 0; i < nodes.size(); ++i)
+    if (nodes[i].is_leaf() && nodes[i].count() >= 2) leaves.push_back(i);
+  REQUIRE(leaves.size() > 4);
+  const std::size_t middle = std::lower_bound(leaves.begin(), leaves.end(), nodes.size() / 2) - leaves.begin();
+  REQUIRE(middle > 0);
+  REQUIRE(middle < leaves.size());
+  using Boxes = std::vector<kdspace::Box3f>;
+  using Nodes = std::vector<kdspace::BoxNode>;
+  using Refs = std::vector<std::uint32_t>;
+  using Blocks = std::vector<kdspace::LeafBlock>;
+  for (std::size_t leaf : {leaves.front(), leaves[middle - 1], leaves[middle], leaves.back()}) {
+    CAPTURE(leaf);
+    const std::size_t first = nodes[leaf].first();
+    const std::string at = "leaf " + std::to_string(leaf) + ": ";
+    refused(tree, at + "leaf block " + std::to_string(first / 4) + " lane 1 differs from box",
+            [&](Boxes&, Nodes&, Refs&, Blocks& b) { b[first / 4].plane[4][1] += 1; });
+    refused(tree, at + "reference names box 40000 of 40000",
+            [&](Boxes&, Nodes&, Refs& r, Blocks&) { r[first] = 40000; });
+    refused(tree, at + "references not ascending", [&](Boxes&, Nodes&, Refs& r, Blocks& b) {
+      std::swap(r[first], r[first + 1]);  // and their blocks' lanes: only the order is wrong
+      for (int c = 0; c < 6; ++c) std::swap(b[first / 4].plane[c][0], b[first / 4].plane[c][1]);
+    });
+  }
+  refused(tree, "box 1: min x is nan",
+          [&](Boxes& x, Nodes&, Refs&, Blocks&) { x[0].lo[0] = std::numeric_limits<float>::quiet_NaN(); });
+  refused(tree, "box 40000: min y 2 > max y", [&](Boxes& x, Nodes&, Refs&, Blocks&) { x.back().lo[1] = 2; });
+  refused(tree, "is in no leaf", [&](Boxes& x, Nodes&, Refs&, Blocks&) { x.push_back(x[0]); });
+  kdspace::BoxTreeParts shrunk = owned_parts(tree);
+  shrunk.bounds.hi[2] = std::nextafter(shrunk.bounds.hi[2], 0.0f);
+  REQUIRE_THROWS_WITH(BoxTree(std::move(shrunk)), Catch::Contains("lies outside the bounds"));
+}
+
+TEST_CASE("index: a large box tree file, checked on two threads, catches a changed byte in every section",
+          "[index][boxes][errors][threads]") {
+  // The two threads checksum the boxes, references and leaf blocks as they check them, and share the
+  // other sections' chunks: a byte changed at the start, the middle and the end of every section is
+  // caught, mapped and read; the untouched file loads with the same nodes and hits.
+  kdspace_test::ScratchDir tmp("kdspace-index-boxes-", true);
+  const auto boxes = kdspace::generate_boxes(60000, kdspace::SceneKind::clustered, 8);
+  const BoxTree tree(boxes);
+  REQUIRE(tree.parts().references.size() >= (std::size_t{1} << 16));
+  const std::string path = tmp.file("large.kdx");
+  io::save(path, tree);
+  const std::vector<unsigned char> bytes = file_bytes(path);
+  for (const io::SectionEntry& s : io::IndexFile::open(path)->info().sections)
+    for (std::uint64_t at : {s.offset, s.offset + s.length / 2, s.offset + s.length - 1}) {
+      CAPTURE(at);
+      std::vector<unsigned char> damaged = bytes;
+      damaged[at] ^= 0x20;
+      write_bytes(path, damaged);
+      for (auto mode : {io::LoadMode::map, io::LoadMode::read})
+        REQUIRE_THROWS_WITH(io::load_box_tree(path, mode), Catch::Contains("checksum mismatch"));
+    }
+  write_bytes(path, bytes);
+  const auto rays = kdspace::random_rays(2000, kdspace::Box3f{{0, 0, 0}, {1, 1, 1}}, 9);
+  for (auto mode : {io::LoadMode::map, io::LoadMode::read}) {
+    const BoxTree loaded = io::load_box_tree(path, mode);
+    REQUIRE(loaded.nodes() == tree.nodes());
+    const auto x = tree.closest_hit_batch(rays, 1), y = loaded.closest_hit_batch(rays, 1);
+    for (std::size_t i = 0; i < rays.size(); ++i) REQUIRE((x[i].box == y[i].box && (x[i].t == y[i].t || !x[i].hit())));
+  }
 }
 
 TEST_CASE("index: box tree files keep the build parameters, and files of the old layout are refused by name",

@@ -415,7 +415,7 @@ int search_tree_index(const SearchJob& job, const std::shared_ptr<const io::Inde
                      " holds a point tree");
   auto load_and_search = [&](auto load) {
     Progress progress("loading " + job.index, Progress::Kind::elapsed);
-    const auto tree = io::load_with_checksums(file, load);
+    const auto tree = load();
     Origin origin;
     origin.load_s = seconds_since(start);
     progress.finish();
@@ -423,8 +423,11 @@ int search_tree_index(const SearchJob& job, const std::shared_ptr<const io::Inde
     return search_tree<T, Metric>(job, tree, queries, origin);
   };
   if (file->info().kind == io::IndexKind::point_tree)
-    return load_and_search([](const auto& f) { return io::load_point_tree<T, Dynamic, Metric>(f); });
-  return load_and_search([](const auto& f) { return io::load_dynamic_point_tree<T, Dynamic, Metric>(f); });
+    return load_and_search([&] { return io::load_point_tree_deferred<T, Dynamic, Metric>(file); });
+  return load_and_search([&] {
+    return io::load_with_checksums(
+        file, [](const auto& f) { return io::load_dynamic_point_tree<T, Dynamic, Metric>(f); });
+  });
 }
 
 template <class T>

@@ -50,7 +50,9 @@ void save(const std::string& path, const BoxTree& tree) {
   w.write(path);
 }
 
-BoxTree load_box_tree(const std::shared_ptr<const IndexFile>& file) {
+namespace {
+
+BoxTree box_tree_of(const std::shared_ptr<const IndexFile>& file, kdspace::detail::CheckCompanion* companion) {
   const IndexInfo& info = file->info();
   if (info.kind != IndexKind::box_tree)
     file->fail("holds " + detail::with_article(name_of(info.kind)) + ", not a box tree");
@@ -81,11 +83,30 @@ BoxTree load_box_tree(const std::shared_ptr<const IndexFile>& file) {
   p.blocks = file->array<LeafBlock>(SectionType::leaf_blocks, 0, 1);
   p.bounds = file->array<Box3f>(SectionType::bounds, 0, 1, 1)[0];
   p.backing = file;
+  p.companion = companion;
   try {
     return BoxTree(std::move(p));
   } catch (const Error& e) {
     file->fail(e.what());
   }
+}
+
+}  // namespace
+
+BoxTree load_box_tree(const std::shared_ptr<const IndexFile>& file) {
+  return box_tree_of(file, nullptr);
+}
+
+BoxTree load_box_tree_deferred(const std::shared_ptr<const IndexFile>& file) {
+  // The check reads the references and their leaf blocks front to back, reference by reference, and
+  // the boxes front to back (besides looking them up by reference).
+  constexpr std::size_t block_bytes_per_reference = sizeof(LeafBlock) / 4;
+  return detail::load_beside_checksums(
+      *file,
+      {{kdspace::detail::box_check_references, file->find(SectionType::references), sizeof(std::uint32_t)},
+       {kdspace::detail::box_check_references, file->find(SectionType::leaf_blocks), block_bytes_per_reference},
+       {kdspace::detail::box_check_boxes, file->find(SectionType::boxes), sizeof(Box3f)}},
+      [&](kdspace::detail::CheckCompanion* checksums) { return box_tree_of(file, checksums); });
 }
 
 }  // namespace kdspace::io

@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <new>
 #include <string>
 #include <system_error>
@@ -370,11 +371,14 @@ void IndexFile::verify_checksums() const {
 // of each other, each chunk long enough that its combine (a few thousand instructions) is noise.
 constexpr std::uint64_t checksum_chunk_bytes = std::uint64_t{1} << 18;
 
-IndexFile::ChecksumPass::ChecksumPass(const IndexFile& file, const SectionEntry* streamed)
-    : file_(file), streamed_(streamed) {
+IndexFile::ChecksumPass::ChecksumPass(const IndexFile& file, std::vector<const SectionEntry*> streamed)
+    : file_(file) {
+  for (const SectionEntry* s : streamed) streamed_.push_back({s, {}});  // null: a section not there
   const std::vector<SectionEntry>& sections = file.info_.sections;
   for (std::size_t i = 0; i < sections.size(); ++i) {
-    if (&sections[i] == streamed) continue;
+    const bool is_streamed = std::any_of(streamed_.begin(), streamed_.end(),
+                                         [&](const Streamed& s) { return s.section == &sections[i]; });
+    if (is_streamed) continue;
     std::uint64_t at = 0;
     do {
       const std::uint64_t length = std::min(checksum_chunk_bytes, sections[i].length - at);
@@ -383,7 +387,7 @@ IndexFile::ChecksumPass::ChecksumPass(const IndexFile& file, const SectionEntry*
     } while (at < sections[i].length);
   }
   crcs_.resize(chunks_.size());
-  if (streamed_) split(streamed_->length);
+  for (std::size_t k = 0; k < streamed_.size(); ++k) split(k, std::numeric_limits<std::uint64_t>::max());
 }
 
 void IndexFile::ChecksumPass::run() {
@@ -392,25 +396,32 @@ void IndexFile::ChecksumPass::run() {
         io::detail::crc32c(file_.bytes_ + chunks_[c].offset, static_cast<std::size_t>(chunks_[c].length));
 }
 
-void IndexFile::ChecksumPass::split(std::uint64_t at) {
-  if (!streamed_) return;
-  at = std::min(at, streamed_->length);
-  streams_[0] = {0, 0, at, 0};
-  streams_[1] = {at, at, streamed_->length, 0};
+void IndexFile::ChecksumPass::split(std::size_t k, std::uint64_t at) {
+  if (k >= streamed_.size() || !streamed_[k].section) return;
+  Streamed& s = streamed_[k];
+  at = std::min(at, s.section->length);
+  s.streams[0] = {0, 0, at, 0};
+  s.streams[1] = {at, at, s.section->length, 0};
 }
 
 // A stream runs this far ahead of the reads it serves: 12 KiB, enough for the CRC's fast loops (three
 // 4 KiB streams, or folding) and well inside the first-level cache, where the walk then finds them.
 constexpr std::uint64_t stream_step_bytes = 3 * 4096;
 
-void IndexFile::ChecksumPass::stream(int walk, std::uint64_t end) {
-  if (!streamed_) return;
-  Stream& s = streams_[walk];
-  if (end <= s.done) return;
+std::uint64_t IndexFile::ChecksumPass::stream(std::size_t k, int walk, std::uint64_t end) {
+  if (k >= streamed_.size() || !streamed_[k].section) return end;
+  const SectionEntry& section = *streamed_[k].section;
+  Stream& s = streamed_[k].streams[walk];
+  if (end <= s.done) return s.done;
   const std::uint64_t to = std::min(s.end, std::max(end, s.done + stream_step_bytes));
-  s.crc = io::detail::crc32c_extend(s.crc, file_.bytes_ + streamed_->offset + s.done,
+  s.crc = io::detail::crc32c_extend(s.crc, file_.bytes_ + section.offset + s.done,
                                     static_cast<std::size_t>(to - s.done));
   s.done = to;
+  // The next step's bytes are asked for now, so that they arrive while the walk reads these.
+  const unsigned char* next = file_.bytes_ + section.offset + to;
+  const std::uint64_t ahead = std::min(stream_step_bytes, s.end - to);
+  for (std::uint64_t at = 0; at < ahead; at += 64) __builtin_prefetch(next + at);
+  return to;
 }
 
 void IndexFile::ChecksumPass::finish() {
@@ -419,10 +430,14 @@ void IndexFile::ChecksumPass::finish() {
   std::size_t c = 0;
   for (std::size_t i = 0; i < sections.size(); ++i) {
     std::uint32_t crc = 0;
-    if (&sections[i] == streamed_) {
-      for (int walk : {0, 1}) stream(walk, streams_[walk].end);
-      crc = io::detail::crc32c_combine(streams_[0].crc, streams_[1].crc,
-                                       static_cast<std::size_t>(streams_[1].end - streams_[1].begin));
+    const auto streamed = std::find_if(streamed_.begin(), streamed_.end(),
+                                       [&](const Streamed& s) { return s.section == &sections[i]; });
+    if (streamed != streamed_.end()) {
+      const auto k = static_cast<std::size_t>(streamed - streamed_.begin());
+      for (int walk : {0, 1}) stream(k, walk, streamed->streams[walk].end);
+      const Stream& second = streamed->streams[1];
+      crc = io::detail::crc32c_combine(streamed->streams[0].crc, second.crc,
+                                       static_cast<std::size_t>(second.end - second.begin));
     } else {
       crc = crcs_[c++];
       for (; c < chunks_.size() && chunks_[c].section == i; ++c)
@@ -431,6 +446,31 @@ void IndexFile::ChecksumPass::finish() {
     if (crc != sections[i].crc)
       file_.fail(file_.describe(sections[i]) + ": checksum mismatch: the file is damaged");
   }
+}
+
+std::vector<const SectionEntry*> SectionChecksums::sections_of(const std::vector<Reader>& readers) {
+  std::vector<const SectionEntry*> sections;
+  for (const Reader& r : readers) sections.push_back(r.section);
+  return sections;
+}
+
+SectionChecksums::SectionChecksums(const IndexFile& file, const std::vector<Reader>& readers)
+    : readers_(readers), pass_(file, sections_of(readers)) {}
+
+void SectionChecksums::split(std::size_t array, std::size_t first) {
+  for (std::size_t k = 0; k < readers_.size(); ++k)
+    if (readers_[k].array == array) pass_.split(k, std::uint64_t{first} * readers_[k].item_bytes);
+}
+
+std::size_t SectionChecksums::ready(std::size_t array, int walk, std::size_t end) {
+  // The least of what the array's sections have ready (each runs a step ahead of `end`).
+  std::size_t ready_to = std::numeric_limits<std::size_t>::max();
+  for (std::size_t k = 0; k < readers_.size(); ++k)
+    if (readers_[k].array == array && readers_[k].section) {
+      const std::uint64_t done = pass_.stream(k, walk, std::uint64_t{end} * readers_[k].item_bytes);
+      ready_to = std::min(ready_to, static_cast<std::size_t>(done / readers_[k].item_bytes));
+    }
+  return ready_to == std::numeric_limits<std::size_t>::max() ? end : ready_to;
 }
 
 const SectionEntry* IndexFile::find(SectionType type, std::uint32_t part) const {

@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "kdspace/box.hpp"
+#include "kdspace/detail/check_companion.hpp"
 #include "kdspace/detail/storage.hpp"
 #include "kdspace/rays/ray.hpp"
 
@@ -42,6 +43,9 @@ namespace kdspace {
 
 namespace detail {
 struct TreeLayout;  // lib/boxes/layout.hpp
+/// The arrays the check of BoxTreeParts tells a CheckCompanion of: references (with their leaf
+/// blocks, reference by reference) and boxes.
+inline constexpr std::size_t box_check_references = 0, box_check_boxes = 1;
 }  // namespace detail
 
 enum class BoxBuildMethod { median, sah, sah_nlogn, binned };
@@ -188,6 +192,7 @@ struct BoxTreeParts {
   detail::Storage<LeafBlock> blocks;
   Box3f bounds;  ///< the root cell: holds every box (the union of the boxes, or more after a refit)
   std::shared_ptr<const void> backing;
+  detail::CheckCompanion* companion = nullptr;  ///< work the check runs beside (not owned; used while it runs)
 };
 
 class BoxTree {

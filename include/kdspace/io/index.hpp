@@ -142,7 +142,8 @@ std::size_t level_for(std::size_t n, std::size_t base_capacity);
 /// calling thread takes its share of what is left of them (IndexFile::ChecksumPass), so that the
 /// two threads share the whole work. The structural checks are safe on any bytes. A checksum error
 /// wins over load's (it explains any other). The loaders that take a path work this way, but for the
-/// point tree's, whose check shares its own two threads with the checksums (below).
+/// point tree's and the box tree's, whose checks share their own two threads with the checksums
+/// (load_point_tree_deferred, load_box_tree_deferred).
 template <class Load>
 auto load_with_checksums(const std::shared_ptr<const IndexFile>& file, Load load) {
   IndexFile::ChecksumPass checksums(*file);
@@ -168,23 +169,32 @@ auto load_checked(const std::string& path, LoadMode mode, Load load) {
   return load_with_checksums(IndexFile::open(path, mode, Checksums::deferred), load);
 }
 
-/// The checksums of a point tree's file, taken beside its structural check (a CheckCompanion): the
-/// points section by the two walks that read it, each range just before it is read (so each byte comes
-/// from memory once), and the other sections in chunks, by whichever thread is done first.
-class PointTreeChecksums final : public kdspace::detail::CheckCompanion {
- public:
-  PointTreeChecksums(const IndexFile& file, std::size_t row_bytes)
-      : pass_(file, file.find(SectionType::points)), row_bytes_(row_bytes) {}
-  void split(std::size_t first_row) override { pass_.split(first_row * row_bytes_); }
-  void rows(int walk, std::size_t end_row) override { pass_.stream(walk, end_row * row_bytes_); }
-  void help() override { pass_.run(); }
-  /// Throws Error naming the first damaged section.
-  void finish() { pass_.finish(); }
+/// The readers of a point tree's check (kdspace::detail::check_rows, check_nodes): the sections it
+/// reads front to back, row by row and node by node.
+inline std::vector<SectionChecksums::Reader> point_tree_readers(const IndexFile& file, std::size_t row_bytes) {
+  const SectionEntry* nodes = file.find(SectionType::nodes);
+  return {{kdspace::detail::check_rows, file.find(SectionType::points), row_bytes},
+          {kdspace::detail::check_rows, file.find(SectionType::order), sizeof(std::uint32_t)},
+          {kdspace::detail::check_nodes, nodes, nodes ? nodes->item_bytes : 1}};
+}
 
- private:
-  IndexFile::ChecksumPass pass_;
-  std::size_t row_bytes_;
-};
+/// Runs load(companion), a loader whose structural check takes the file's checksums on its own threads
+/// (a SectionChecksums over the sections it reads, `readers`), then judges the checksums; a damaged
+/// section explains any other problem: its message wins.
+template <class Load>
+auto load_beside_checksums(const IndexFile& file, const std::vector<SectionChecksums::Reader>& readers,
+                           Load load) {
+  SectionChecksums checksums(file, readers);
+  std::optional<decltype(load(&checksums))> result;
+  try {
+    result.emplace(load(&checksums));
+  } catch (...) {
+    checksums.finish();
+    throw;
+  }
+  checksums.finish();
+  return std::move(*result);
+}
 
 template <class T, int Dim, class Metric>
 PointTree<T, Dim, Metric> point_tree_of(const std::shared_ptr<const IndexFile>& file,
@@ -221,19 +231,20 @@ PointTree<T, Dim, Metric> load_point_tree(const std::shared_ptr<const IndexFile>
   return detail::point_tree_of<T, Dim, Metric>(file, nullptr);
 }
 
+/// Loads a point tree from a file opened with Checksums::deferred, whose checksums its structural check
+/// takes on its own threads (what load_point_tree(path) does once it has opened the file).
+template <class T, int Dim = Dynamic, class Metric = L2>
+PointTree<T, Dim, Metric> load_point_tree_deferred(const std::shared_ptr<const IndexFile>& file) {
+  return detail::load_beside_checksums(
+      *file, detail::point_tree_readers(*file, static_cast<std::size_t>(file->info().dim) * sizeof(T)),
+      [&](kdspace::detail::CheckCompanion* checksums) {
+        return detail::point_tree_of<T, Dim, Metric>(file, checksums);
+      });
+}
+
 template <class T, int Dim = Dynamic, class Metric = L2>
 PointTree<T, Dim, Metric> load_point_tree(const std::string& path, LoadMode mode = LoadMode::map) {
-  const auto file = IndexFile::open(path, mode, Checksums::deferred);
-  detail::PointTreeChecksums checksums(*file, static_cast<std::size_t>(file->info().dim) * sizeof(T));
-  std::optional<PointTree<T, Dim, Metric>> tree;
-  try {
-    tree.emplace(detail::point_tree_of<T, Dim, Metric>(file, &checksums));
-  } catch (...) {
-    checksums.finish();  // a damaged section explains any other problem: its message wins
-    throw;
-  }
-  checksums.finish();
-  return std::move(*tree);
+  return load_point_tree_deferred<T, Dim, Metric>(IndexFile::open(path, mode, Checksums::deferred));
 }
 
 // ---- DynamicPointTree ----------------------------------------------------------------------------------
@@ -352,9 +363,11 @@ PointForest<T> load_point_forest(const std::string& path, LoadMode mode = LoadMo
 
 void save(const std::string& path, const BoxTree& tree);
 BoxTree load_box_tree(const std::shared_ptr<const IndexFile>& file);
+/// Loads a box tree from a file opened with Checksums::deferred, whose checksums its structural check
+/// takes on its own threads (two for a large tree).
+BoxTree load_box_tree_deferred(const std::shared_ptr<const IndexFile>& file);
 inline BoxTree load_box_tree(const std::string& path, LoadMode mode = LoadMode::map) {
-  return detail::load_checked(
-      path, mode, [](const std::shared_ptr<const IndexFile>& file) { return load_box_tree(file); });
+  return load_box_tree_deferred(IndexFile::open(path, mode, Checksums::deferred));
 }
 
 extern template void save<float>(const std::string&, const PointForest<float>&, const ForestSearchParams*);

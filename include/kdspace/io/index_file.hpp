@@ -39,8 +39,10 @@
 // ranges in range, no cycles, and for point trees every point inside the splits above it) before a
 // query can run, while a second thread checks the sections' checksums in chunks that the first shares
 // once done (structural checks are safe on any bytes); both pass, or no index. A large point tree's
-// check walks two halves of the tree on two threads, which checksum the points just before they
-// check them (each byte read from memory once) and then share the other sections' chunks. Every problem throws
+// or box tree's check runs on two threads of its own, each reading its half of the arrays it reads
+// front to back (a point tree's nodes, points and order; a box tree's boxes, references and leaf
+// blocks), which it checksums just before it checks them (SectionChecksums: each byte read from
+// memory once); then both share the other sections' chunks. Every problem throws
 // kdspace::Error naming the file and what is wrong; nothing is allocated for what a header claims
 // (every length is checked against the file's size first).
 //
@@ -60,6 +62,7 @@
 #include <string>
 #include <vector>
 
+#include "kdspace/detail/check_companion.hpp"
 #include "kdspace/detail/storage.hpp"
 
 namespace kdspace::io {
@@ -186,20 +189,23 @@ class IndexFile {
   /// chunk checksums (crc32c_combine) and throws Error naming the first damaged section (it checksums
   /// itself whatever is left, so that it always judges every byte).
   ///
-  /// One section may be `streamed` instead: left out of the shared chunks, it is checksummed by the
-  /// two threads that read it anyway (a point tree's walks over its points), each over its own range
-  /// of it (split() sets where the second begins) as it goes (stream(walk, end): the bytes up to `end`
-  /// are about to be read), so that each byte is read from memory once. finish() checksums whatever
-  /// of the section the streams did not reach, so its result never depends on how far they got.
+  /// Some sections may be `streamed` instead (a null entry stands for a section the file lacks: its
+  /// stream does nothing): left out of the shared chunks, each is checksummed by the two threads that
+  /// read it anyway (a point tree's walks over its nodes, points and order), each over its own range of
+  /// it (split() sets where the second begins) as it goes (stream(k, walk, end): the bytes up to `end`
+  /// of streamed section k are about to be read), so that each byte is read from memory once. finish()
+  /// checksums whatever of a section the streams did not reach, so its result never depends on how far
+  /// they got.
   class ChecksumPass {
    public:
-    explicit ChecksumPass(const IndexFile& file, const SectionEntry* streamed = nullptr);
+    explicit ChecksumPass(const IndexFile& file, std::vector<const SectionEntry*> streamed = {});
     void run();
-    /// The second stream's range starts at byte `at` of the streamed section (by default at its end).
-    void split(std::uint64_t at);
-    /// Stream `walk` (0 or 1; one thread each) checksums its range up to byte `end` of the section, and
-    /// a little beyond (a chunk at a time, within its range).
-    void stream(int walk, std::uint64_t end);
+    /// Stream 1 of streamed section k starts at byte `at` of it (by default at its end).
+    void split(std::size_t k, std::uint64_t at);
+    /// Stream `walk` (0 or 1; one thread each) of streamed section k checksums its range up to byte
+    /// `end` of the section, and a little beyond (a step at a time, within its range). Returns the byte
+    /// it has now reached (the end of its range once done).
+    std::uint64_t stream(std::size_t k, int walk, std::uint64_t end);
     void finish();
 
    private:
@@ -207,17 +213,20 @@ class IndexFile {
       std::size_t section;
       std::uint64_t offset, length;
     };
-    // A range [begin, end) of the streamed section's bytes, checksummed up to `done`.
+    // A range [begin, end) of a streamed section's bytes, checksummed up to `done`.
     struct Stream {
       std::uint64_t begin = 0, done = 0, end = 0;
       std::uint32_t crc = 0;
+    };
+    struct Streamed {
+      const SectionEntry* section;
+      Stream streams[2];
     };
     const IndexFile& file_;
     std::vector<Chunk> chunks_;
     std::vector<std::uint32_t> crcs_;
     std::atomic<std::size_t> next_{0};
-    const SectionEntry* streamed_;
-    Stream streams_[2];
+    std::vector<Streamed> streamed_;
   };
 
   /// Throws Error("PATH: what").
@@ -237,6 +246,31 @@ class IndexFile {
   std::size_t size_ = 0;
   bool mapped_ = false;
   void* buffer_ = nullptr;  // LoadMode::read: the aligned copy of the file
+};
+
+/// The checksums of a file, taken beside the structural check of the tree loaded from it (a
+/// CheckCompanion): the sections the check reads front to back (its `readers`) by the two walks that
+/// read them, each range just before it is read, and the others in chunks, by whichever thread is done
+/// first. finish() throws Error naming the first damaged section.
+class SectionChecksums final : public kdspace::detail::CheckCompanion {
+ public:
+  /// Item i of the check's array `array` is bytes [i * item_bytes, (i + 1) * item_bytes) of
+  /// `section` (null: a section the file lacks, left to the loader to name).
+  struct Reader {
+    std::size_t array;
+    const SectionEntry* section;
+    std::size_t item_bytes;
+  };
+  SectionChecksums(const IndexFile& file, const std::vector<Reader>& readers);
+  void split(std::size_t array, std::size_t first) override;
+  std::size_t ready(std::size_t array, int walk, std::size_t end) override;
+  void help() override { pass_.run(); }
+  void finish() { pass_.finish(); }
+
+ private:
+  static std::vector<const SectionEntry*> sections_of(const std::vector<Reader>& readers);
+  std::vector<Reader> readers_;
+  IndexFile::ChecksumPass pass_;
 };
 
 /// Collects the sections of one index and writes them as one file, atomically.

@@ -27,6 +27,7 @@
 #include <emmintrin.h>
 #endif
 
+#include "kdspace/detail/check_companion.hpp"
 #include "kdspace/detail/storage.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/node.hpp"
@@ -38,20 +39,9 @@ namespace kdspace::detail {
 /// The deepest tree a search accepts: the builder's cap on max_depth.
 inline constexpr std::size_t max_tree_depth = 256;
 
-/// Work a loader shares the tree check's threads with: the checksums of the file the parts come from.
-/// The check splits the points in two ranges, [0, first_row) and [first_row, n), walked by two threads
-/// (walks 0 and 1), and tells the companion which rows each walk is about to read, so that the
-/// companion can checksum them just before (they are then read from memory once).
-class CheckCompanion {
- public:
-  virtual ~CheckCompanion() = default;
-  /// Before the walks start: walk 1 reads rows [first_row, n), walk 0 those before.
-  virtual void split(std::size_t first_row) = 0;
-  /// Walk 0 or 1 (one thread each) is about to read its rows up to `end_row`.
-  virtual void rows(int walk, std::size_t end_row) = 0;
-  /// A thread done with its share of the check takes a share of the companion's own work.
-  virtual void help() = 0;
-};
+/// The arrays the check tells a CheckCompanion of: rows (the points and their order, row by row)
+/// and nodes.
+inline constexpr std::size_t check_rows = 0, check_nodes = 1;
 
 /// Everything a PointTree is made of. `backing` keeps borrowed storage alive (null when all is owned).
 template <class T>
@@ -114,7 +104,7 @@ class TreeChecker {
   }
 
   // A depth-first walk over one subtree after another, in node order, each in its cell, checking
-  // that nodes and the leaves' points follow each other without a gap.
+  // that nodes and the leaves' points follow each other without a gap; then the order of its rows.
   struct Walk {
     int id = 0;                  // 0 or 1: which of the companion's streams it reads
     std::vector<T> lo, hi;       // the root cell cut by the splits above the node being visited
@@ -122,6 +112,8 @@ class TreeChecker {
     std::size_t next_point = 0;  // the point the next leaf must start at
     TreeShape shape;
     CheckCompanion* companion = nullptr;
+    std::size_t rows_ready = 0, nodes_ready = 0;  // what the companion has made ready to read
+    std::vector<std::uint64_t> seen;              // the order's values of its rows, as bits (mark_order)
   };
 
   // A subtree one walk checks whole: its root, depth and cell, and where it ends (set by the walk).
@@ -132,13 +124,17 @@ class TreeChecker {
   };
 
   TreeShape run_on_one_thread(CheckCompanion* companion) {
-    if (companion) companion->split(n_);
-    check_order(0, n_, true);
+    if (companion) {
+      companion->split(check_rows, n_);
+      companion->split(check_nodes, p_.nodes.size());
+    }
     Walk walk;
     walk.lo = p_.root_lo;
     walk.hi = p_.root_hi;
     walk.companion = companion;
+    walk.seen.assign(n_ / 64 + 1, 0);
     visit(walk, 0);
+    mark_order(walk, 0, n_);
     if (companion) companion->help();
     if (walk.next_node != p_.nodes.size())
       fail("nodes " + std::to_string(walk.next_node) + " to " + std::to_string(p_.nodes.size() - 1) +
@@ -146,14 +142,16 @@ class TreeChecker {
     if (walk.next_point != n_)
       fail("the leaves hold points [0, " + std::to_string(walk.next_point) + "), expected [0, " +
            std::to_string(n_) + ")");
+    if (!all_seen(walk.seen)) fail_order();
     return walk.shape;
   }
 
   // The tree cut at a node near the middle of the node array: the path from the root down to it, the
   // subtrees left of the path (walk 0, in node order, ending with the subtree under the path's last
-  // node when walk 1 has more), and those right of it (walk 1). Each walk also checks half of the point
-  // order, then helps the companion. No shape when the tree does not divide (its root is a leaf).
-  // Any problem throws, and run() starts over on one thread, whose message names it.
+  // node when walk 1 has more), and those right of it (walk 1). Each walk then marks the order of its
+  // own rows (the seam between them is checked once, below), and helps the companion. No shape when
+  // the tree does not divide (its root is a leaf). Any problem throws, and run() starts over on one
+  // thread, whose message names it.
   std::optional<TreeShape> run_on_two_threads() {
     const std::size_t nodes = p_.nodes.size();
     std::vector<Subtree> subtrees[2];
@@ -193,9 +191,12 @@ class TreeChecker {
     if (leftmost >= nodes || p_.nodes[leftmost].first() > n_) fail("no leaf");
     const std::size_t split_point = p_.nodes[leftmost].first();
 
-    if (p_.companion) p_.companion->split(split_point);
+    // Walk 0's nodes all lie before walk 1's first subtree (the path's nodes too, read above).
+    if (p_.companion) {
+      p_.companion->split(check_rows, split_point);
+      p_.companion->split(check_nodes, subtrees[1].front().root);
+    }
     Walk walks[2];  // each thread walks a copy of its own (two walks in one cache line would share it)
-    std::vector<std::uint64_t> seen[2];
     auto share = [&](int w) {
       Walk walk;
       walk.id = w;
@@ -203,6 +204,7 @@ class TreeChecker {
       walk.hi.resize(dim_);
       walk.companion = p_.companion;
       walk.next_point = w == 0 ? 0 : split_point;
+      walk.seen.assign(n_ / 64 + 1, 0);
       for (Subtree& s : subtrees[w]) {
         walk.next_node = s.root;
         std::copy(s.lo.begin(), s.lo.end(), walk.lo.begin());
@@ -210,7 +212,7 @@ class TreeChecker {
         visit(walk, s.depth);
         s.node_end = walk.next_node;
       }
-      seen[w] = check_order(w == 0 ? 0 : n_ / 2, w == 0 ? n_ / 2 : n_, false);
+      mark_order(walk, w == 0 ? 0 : split_point, w == 0 ? split_point : n_);
       if (p_.companion) p_.companion->help();
       walks[w] = std::move(walk);
     };
@@ -238,9 +240,10 @@ class TreeChecker {
     if (expected != nodes || path_at != path.size() || at[0] != subtrees[0].size() ||
         at[1] != subtrees[1].size() || walks[0].next_point != split_point || walks[1].next_point != n_)
       fail("pieces out of order");
-    // Between them the halves of the order hold every index: n values, none missing, none twice.
-    for (std::size_t w = 0; w < seen[0].size(); ++w) seen[0][w] |= seen[1][w];
-    if (!all_seen(seen[0])) fail("the order is no permutation");
+    // Between them the walks' rows hold every index: n values, none missing, none twice.
+    std::vector<std::uint64_t>& seen = walks[0].seen;
+    for (std::size_t w = 0; w < seen.size(); ++w) seen[w] |= walks[1].seen[w];
+    if (!all_seen(seen)) fail("the order is no permutation");
     TreeShape shape;
     shape.depth = std::max(walks[0].shape.depth, walks[1].shape.depth);
     shape.leaves = walks[0].shape.leaves + walks[1].shape.leaves;
@@ -256,42 +259,50 @@ class TreeChecker {
     return missing == 0;
   }
 
-  // The values order[begin, end) as bits of [0, n], a value out of range as bit n. The loop only sets
-  // bits, without a branch on each value. With `whole` (the order from 0 to n), also checks they are a
-  // permutation of [0, n) (n values whose bits cover [0, n): a value given twice leaves another out),
-  // and when they are not a second pass finds the culprit for the message.
-  std::vector<std::uint64_t> check_order(std::size_t begin, std::size_t end, bool whole) const {
-    std::vector<std::uint64_t> seen(n_ / 64 + 1, 0);
+  // Sets the bits of the order's values of rows [begin, end) in walk.seen (bits of [0, n]; a value out
+  // of range sets bit n), a block at a time as the companion makes them ready, without a branch on
+  // each value. n values whose bits cover [0, n) are a permutation of it: a value given twice leaves
+  // another out. (A pass of its own, not a part of each leaf's visit: mixed into the leaves' checks,
+  // its scattered writes slowed them more than it saved.)
+  void mark_order(Walk& walk, std::size_t begin, std::size_t end) const {
     const std::uint32_t* order = p_.order.data();
+    std::uint64_t* bits = walk.seen.data();
     const auto n = static_cast<std::uint32_t>(n_);
-    const auto set = [&seen, n](std::uint32_t v) {
+    const auto mark = [bits, n](std::uint32_t v) {
       v = std::min(v, n);
-      seen[v >> 6] |= std::uint64_t{1} << (v & 63);
+      bits[v >> 6] |= std::uint64_t{1} << (v & 63);
     };
-    std::size_t i = begin;
-    for (; i + 4 <= end; i += 4) {  // four independent updates a step: a third faster than one
-      set(order[i]);
-      set(order[i + 1]);
-      set(order[i + 2]);
-      set(order[i + 3]);
+    for (std::size_t i = begin; i < end;) {
+      const std::size_t ready =
+          walk.companion ? std::clamp(walk.companion->ready(check_rows, walk.id, i + 1), i + 1, end) : end;
+      for (; i + 4 <= ready; i += 4) {  // four independent updates a step: a third faster than one
+        mark(order[i]);
+        mark(order[i + 1]);
+        mark(order[i + 2]);
+        mark(order[i + 3]);
+      }
+      for (; i < ready; ++i) mark(order[i]);
     }
-    for (; i < end; ++i) set(order[i]);
-    if (!whole || all_seen(seen)) return seen;
-    std::fill(seen.begin(), seen.end(), 0);
-    for (i = 0; i < n_; ++i) {
-      const std::uint32_t v = order[i];
+  }
+
+  // The order is no permutation: names the first index out of range or given twice.
+  [[noreturn]] void fail_order() const {
+    std::vector<std::uint64_t> seen(n_ / 64 + 1, 0);
+    for (std::size_t i = 0; i < n_; ++i) {
+      const std::uint32_t v = p_.order[i];
       const std::uint64_t bit = std::uint64_t{1} << (v & 63);
       if (v >= n_ || (seen[v >> 6] & bit) != 0)
         fail("index " + std::to_string(i) + " of the point order is " + std::to_string(v) +
              (v >= n_ ? " (out of range)" : " (given twice)"));
       seen[v >> 6] |= bit;
     }
-    return seen;
+    fail("the order is no permutation");
   }
 
   void visit(Walk& walk, std::size_t depth) {
     const std::size_t id = walk.next_node++;
     if (id >= p_.nodes.size()) fail("a right child lies past the last node");
+    if (id >= walk.nodes_ready && walk.companion) walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
     if (depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
     const PointNode<T>& node = p_.nodes[id];
     if (node.is_leaf()) return visit_leaf(walk, id, node, depth);
@@ -321,7 +332,8 @@ class TreeChecker {
     walk.next_point += count;
     walk.shape.depth = std::max(walk.shape.depth, depth);
     ++walk.shape.leaves;
-    if (walk.companion) walk.companion->rows(walk.id, first + count);
+    if (first + count > walk.rows_ready && walk.companion)
+      walk.rows_ready = walk.companion->ready(check_rows, walk.id, first + count);
     const T* rows = p_.points.data() + first * dim_;
     const T* lo = walk.lo.data();
     const T* hi = walk.hi.data();
