@@ -445,7 +445,8 @@ TEST_CASE("index: a large box tree file, checked on two threads, catches a chang
   const std::string path = tmp.file("large.kdx");
   io::save(path, tree);
   const std::vector<unsigned char> bytes = file_bytes(path);
-  for (const io::SectionEntry& s : io::IndexFile::open(path)->info().sections)
+  const std::vector<io::SectionEntry> sections = io::IndexFile::open(path)->info().sections;
+  for (const io::SectionEntry& s : sections)
     for (std::uint64_t at : {s.offset, s.offset + s.length / 2, s.offset + s.length - 1}) {
       CAPTURE(at);
       std::vector<unsigned char> damaged = bytes;
