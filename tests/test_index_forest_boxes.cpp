@@ -1,8 +1,8 @@
 // Index files of PointForest and BoxTree: round trips (mapped and read) give the same structure and
 // the same answers; every changed byte is a clear error; resealed changes never make a query read out
 // of bounds (ASan runs these too).
-#include <catch2/catch.hpp>
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -404,7 +404,8 @@ TEST_CASE("index: a large box tree, checked on two threads, names each problem a
   for (std::size_t i = 0; i < nodes.size(); ++i)
     if (nodes[i].is_leaf() && nodes[i].count() >= 2) leaves.push_back(i);
   REQUIRE(leaves.size() > 4);
-  const std::size_t middle = std::lower_bound(leaves.begin(), leaves.end(), nodes.size() / 2) - leaves.begin();
+  const std::size_t middle =
+      std::lower_bound(leaves.begin(), leaves.end(), nodes.size() / 2) - leaves.begin();
   REQUIRE(middle > 0);
   REQUIRE(middle < leaves.size());
   using Boxes = std::vector<kdspace::Box3f>;
@@ -461,7 +462,8 @@ TEST_CASE("index: a large box tree file, checked on two threads, catches a chang
     const BoxTree loaded = io::load_box_tree(path, mode);
     REQUIRE(loaded.nodes() == tree.nodes());
     const auto x = tree.closest_hit_batch(rays, 1), y = loaded.closest_hit_batch(rays, 1);
-    for (std::size_t i = 0; i < rays.size(); ++i) REQUIRE((x[i].box == y[i].box && (x[i].t == y[i].t || !x[i].hit())));
+    for (std::size_t i = 0; i < rays.size(); ++i)
+      REQUIRE((x[i].box == y[i].box && (x[i].t == y[i].t || !x[i].hit())));
   }
 }
 

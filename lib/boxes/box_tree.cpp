@@ -182,22 +182,25 @@ void check_leaf(const BoxTreeParts& p, std::size_t leaf_id, std::size_t first, s
     // its bytes' cache lines (a 24-byte box straddles two in a quarter of the cases). Against 16 ahead
     // and its first line only: 1e6 uniform boxes, the check's processor time 26.6 -> 16.6 ms.
     if (first + i + prefetch_references < refs && n > 0) {
-      const auto* ahead = reinterpret_cast<const char*>(boxes + std::min<std::size_t>(ids[i + prefetch_references], n - 1));
+      const auto* ahead =
+          reinterpret_cast<const char*>(boxes + std::min<std::size_t>(ids[i + prefetch_references], n - 1));
       __builtin_prefetch(ahead);
       __builtin_prefetch(ahead + sizeof(Box3f) - 1);
     }
     const std::uint32_t id = ids[i];
-    if (id >= n) fail_parts(leaf() + "reference names box " + std::to_string(id) + " of " + std::to_string(n));
+    if (id >= n)
+      fail_parts(leaf() + "reference names box " + std::to_string(id) + " of " + std::to_string(n));
     if (i < count ? i > 0 && id <= ids[i - 1] : id != ids[count - 1])
-      fail_parts(leaf() + (i < count ? "references not ascending" : "padding does not repeat the last reference"));
+      fail_parts(leaf() +
+                 (i < count ? "references not ascending" : "padding does not repeat the last reference"));
     referenced[id >> 6] |= std::uint64_t{1} << (id & 63);
     const LeafBlock& block = p.blocks[(first + i) / 4];
     const Box3f& b = boxes[id];
     const std::size_t lane = i % 4;
     for (int a = 0; a < 3; ++a)
       if (!(block.plane[a][lane] == b.lo[a] && block.plane[3 + a][lane] == b.hi[a]))
-        fail_parts(leaf() + "leaf block " + std::to_string((first + i) / 4) + " lane " + std::to_string(lane) +
-                   " differs from box " + std::to_string(id));
+        fail_parts(leaf() + "leaf block " + std::to_string((first + i) / 4) + " lane " +
+                   std::to_string(lane) + " differs from box " + std::to_string(id));
   }
 }
 
@@ -220,7 +223,8 @@ std::size_t check_nodes(const BoxTreeParts& p, Leaf&& leaf) {
     if (at.id != next || next >= p.nodes.size())
       fail_parts(where() + "child " + std::to_string(at.id) + ", expected " + std::to_string(next) + " (of " +
                  std::to_string(p.nodes.size()) + " nodes)");
-    if (at.depth > max_box_tree_depth) fail_parts(where() + "deeper than " + std::to_string(max_box_tree_depth));
+    if (at.depth > max_box_tree_depth)
+      fail_parts(where() + "deeper than " + std::to_string(max_box_tree_depth));
     const BoxNode& node = p.nodes[next++];
     if (node.is_leaf()) {
       const std::size_t count = node.count(), padded = (count + 3) / 4 * 4;
@@ -313,7 +317,8 @@ std::size_t check_parts_on_two_threads(const BoxTreeParts& p) {
     const std::size_t box_end = w == 0 ? n / 2 : n;
     for (std::size_t i = w == 0 ? 0 : n / 2; i < box_end;) {
       const std::size_t ready =
-          companion ? std::clamp(companion->ready(detail::box_check_boxes, w, i + 1), i + 1, box_end) : box_end;
+          companion ? std::clamp(companion->ready(detail::box_check_boxes, w, i + 1), i + 1, box_end)
+                    : box_end;
       if (!boxes_inside(p.boxes.data(), i, ready, p.bounds)) fail_parts("a box");
       i = ready;
     }

@@ -52,7 +52,8 @@ void save(const std::string& path, const BoxTree& tree) {
 
 namespace {
 
-BoxTree box_tree_of(const std::shared_ptr<const IndexFile>& file, kdspace::detail::CheckCompanion* companion) {
+BoxTree box_tree_of(const std::shared_ptr<const IndexFile>& file,
+                    kdspace::detail::CheckCompanion* companion) {
   const IndexInfo& info = file->info();
   if (info.kind != IndexKind::box_tree)
     file->fail("holds " + detail::with_article(name_of(info.kind)) + ", not a box tree");
@@ -104,7 +105,8 @@ BoxTree load_box_tree_deferred(const std::shared_ptr<const IndexFile>& file) {
   return detail::load_beside_checksums(
       *file,
       {{kdspace::detail::box_check_references, file->find(SectionType::references), sizeof(std::uint32_t)},
-       {kdspace::detail::box_check_references, file->find(SectionType::leaf_blocks), block_bytes_per_reference},
+       {kdspace::detail::box_check_references, file->find(SectionType::leaf_blocks),
+        block_bytes_per_reference},
        {kdspace::detail::box_check_boxes, file->find(SectionType::boxes), sizeof(Box3f)}},
       [&](kdspace::detail::CheckCompanion* checksums) { return box_tree_of(file, checksums); });
 }

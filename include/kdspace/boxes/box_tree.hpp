@@ -192,7 +192,8 @@ struct BoxTreeParts {
   detail::Storage<LeafBlock> blocks;
   Box3f bounds;  ///< the root cell: holds every box (the union of the boxes, or more after a refit)
   std::shared_ptr<const void> backing;
-  detail::CheckCompanion* companion = nullptr;  ///< work the check runs beside (not owned; used while it runs)
+  /// Work the check runs beside (not owned; used while it runs).
+  detail::CheckCompanion* companion = nullptr;
 };
 
 class BoxTree {
@@ -204,9 +205,9 @@ class BoxTree {
   explicit BoxTree(const std::vector<Box3f>& boxes, const BoxBuildParams& params = {});
   /// Makes the tree of `parts` after checking them whole: valid boxes, nodes depth first with every
   /// link in range and no path deeper than max_box_tree_depth (the traversal's stack), each leaf's
-  /// references ascending, in range and padded as the layout pads them, every box in every leaf
-  /// whose cell it meets, and the leaf blocks equal to the boxes they copy; throws
-  /// Error("box tree: ...") otherwise.
+  /// references ascending, in range and padded as the layout pads them, every box inside the root cell
+  /// and in some leaf (not that it is in every leaf whose cell it meets), and the leaf blocks equal to
+  /// the boxes they copy (two threads check a large tree); throws Error("box tree: ...") otherwise.
   explicit BoxTree(BoxTreeParts parts);
   /// The tree's arrays, borrowed (valid while the tree lives).
   BoxTreeParts parts() const;

@@ -171,7 +171,8 @@ auto load_checked(const std::string& path, LoadMode mode, Load load) {
 
 /// The readers of a point tree's check (kdspace::detail::check_rows, check_nodes): the sections it
 /// reads front to back, row by row and node by node.
-inline std::vector<SectionChecksums::Reader> point_tree_readers(const IndexFile& file, std::size_t row_bytes) {
+inline std::vector<SectionChecksums::Reader> point_tree_readers(const IndexFile& file,
+                                                                std::size_t row_bytes) {
   const SectionEntry* nodes = file.find(SectionType::nodes);
   return {{kdspace::detail::check_rows, file.find(SectionType::points), row_bytes},
           {kdspace::detail::check_rows, file.find(SectionType::order), sizeof(std::uint32_t)},

@@ -302,7 +302,8 @@ class TreeChecker {
   void visit(Walk& walk, std::size_t depth) {
     const std::size_t id = walk.next_node++;
     if (id >= p_.nodes.size()) fail("a right child lies past the last node");
-    if (id >= walk.nodes_ready && walk.companion) walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
+    if (id >= walk.nodes_ready && walk.companion)
+      walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
     if (depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
     const PointNode<T>& node = p_.nodes[id];
     if (node.is_leaf()) return visit_leaf(walk, id, node, depth);
