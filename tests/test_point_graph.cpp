@@ -167,6 +167,34 @@ TEST_CASE("graph: queries far from the data still get better answers as ef grows
   CHECK(previous == 1.0);
 }
 
+TEST_CASE("graph: rows far from the rest do not cost the other points their graph", "[points][graph]") {
+  // The build scores rows on a grid of 16-bit integers; a grid scaled to the widest axis's whole
+  // range would put every point but the outlier on a few cells, and ties broken by row would make
+  // the graph arbitrary. The same points with and without the outliers must reach the same recall.
+  const std::size_t dim = 16, n = 4000, k = 10, nq = 150, ef = 20;
+  const auto pts = make_points<float>(Shape::uniform, n, dim, 611);
+  const auto queries = near_the_data(pts, n, dim, nq, 612);
+  // One outlier (the grid's scale then comes from the axes' robust ranges), or 2% of the rows
+  // far out (no robust range leaves them out: the build scores the float rows themselves).
+  const std::size_t outliers = GENERATE(as<std::size_t>{}, 1, 80);
+  auto with_outlier = pts;
+  for (std::size_t o = 0; o < outliers; ++o)
+    for (std::size_t a = 0; a < dim; ++a) with_outlier.push_back(a == 0 ? 1e4f + static_cast<float>(o) : 0.f);
+  double recall[2];
+  for (int outlier = 0; outlier < 2; ++outlier) {
+    const auto& data = outlier ? with_outlier : pts;
+    const PointForest<float> forest(data.data(), data.size() / dim, dim, with_graph());
+    const auto exact = forest.knn_exact_batch(queries.data(), nq, k, 1);
+    const auto found = forest.knn_batch(queries.data(), nq, k, graph_search(ef), 1);
+    CHECK(distance_not_exact(found, data, dim, queries) == "");
+    recall[outlier] = kdspace::recall_at_k(found, exact);
+  }
+  INFO("recall at ef " << ef << ": " << recall[0] << " without the outliers, " << recall[1] << " with "
+                        << outliers);
+  CHECK(recall[0] > 0.8);
+  CHECK(recall[1] >= recall[0] - 0.02);
+}
+
 TEST_CASE("graph: one graph and the same answers on any thread count", "[points][graph][threads]") {
   const std::size_t dim = 40, n = 6000, nq = 200, k = 10;
   const auto pts = make_points<float>(Shape::clustered, n, dim, 611);

@@ -18,6 +18,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <vector>
 
 #include "graph_search.hpp"
@@ -28,17 +29,48 @@
 
 namespace kdspace::detail {
 
-/// The rows (n of `dim` values of U) on the grid described above.
+/// Rows of the sample that quantize_rows() reads each axis's robust range from, and the share of
+/// its values left out at each end.
+constexpr std::size_t grid_sample_rows = 8192;
+constexpr double grid_tail_share = 0.001;
+/// The grid steps the typical axis (the median of the axes' robust ranges) must span for the grid
+/// to be used: below it the rows are scored as they are (BuildFloatScorer).
+constexpr double least_grid_steps = 256;
+
+/// The rows (n of `dim` values of U) on the grid described above, or nothing when the grid would
+/// be too coarse.
+///
+/// The scale is set by each axis's robust range (the central 99.8% of its values in an even sample
+/// of the rows), not its whole range: one row far from the rest would otherwise widen the grid's
+/// step beyond the spread of all the others, put them on a few cells, and leave their order to ties
+/// by row. The grid's window on an axis is centred on that range, then moved to cover as much of the
+/// axis's whole range as it can; a coordinate outside it saturates at 0 or top (the graph only needs
+/// the near distances right; a query's distances are computed again from the points). When even the
+/// robust ranges leave the typical axis fewer than least_grid_steps steps (most axes narrow beside a
+/// few wide ones, or many outliers), a distance would be decided by a few axes' rounding: nothing is
+/// returned, and the build scores the rows themselves.
 template <class U>
-std::vector<std::uint16_t> quantize_rows(const U* rows, std::size_t n, std::size_t dim) {
-  std::vector<double> low(dim, std::numeric_limits<double>::infinity()), high(dim, -low[0]);
+std::optional<std::vector<std::uint16_t>> quantize_rows(const U* rows, std::size_t n, std::size_t dim) {
+  std::vector<double> least(dim, std::numeric_limits<double>::infinity()), most(dim, -least[0]);
   for (std::size_t r = 0; r < n; ++r)
     for (std::size_t a = 0; a < dim; ++a) {
       const double x = static_cast<double>(rows[r * dim + a]);
-      low[a] = std::min(low[a], x), high[a] = std::max(high[a], x);
+      least[a] = std::min(least[a], x), most[a] = std::max(most[a], x);
     }
-  double widest = 0;
-  for (std::size_t a = 0; a < dim; ++a) widest = std::max(widest, high[a] - low[a]);
+  // Each axis's robust range, from rows spread evenly over the set.
+  const std::size_t m = std::min(n, grid_sample_rows);
+  const auto cut = static_cast<std::size_t>(grid_tail_share * static_cast<double>(m > 0 ? m - 1 : 0));
+  std::vector<double> centre(dim, 0), spread(dim, 0), values(m);
+  for (std::size_t a = 0; a < dim && m > 0; ++a) {
+    for (std::size_t i = 0; i < m; ++i) values[i] = static_cast<double>(rows[(i * n / m) * dim + a]);
+    const auto rank = [&](std::size_t at) {
+      std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(at), values.end());
+      return values[at];
+    };
+    const double robust_low = rank(cut), robust_high = rank(m - 1 - cut);
+    centre[a] = 0.5 * (robust_low + robust_high), spread[a] = robust_high - robust_low;
+  }
+  const double widest = dim > 0 ? *std::max_element(spread.begin(), spread.end()) : 0;
   // Each coordinate's difference fits in int16, a pair of squares in int32, a row's sum in uint32.
   const double top = std::min(
       32767.0, std::floor(std::sqrt(4294967295.0 / static_cast<double>(std::max<std::size_t>(dim, 1)))));
@@ -46,11 +78,24 @@ std::vector<std::uint16_t> quantize_rows(const U* rows, std::size_t n, std::size
   // every distance is the same multiple of their own (a power of four) and converts to T with the
   // same rounding, so points of integer values get the graph their byte rows get.
   const double scale = widest > 0 ? std::exp2(std::floor(std::log2(top / widest))) : 0;
+  if (dim > 0) {
+    std::vector<double> typical = spread;
+    std::nth_element(typical.begin(), typical.begin() + static_cast<std::ptrdiff_t>(dim / 2), typical.end());
+    if (typical[dim / 2] * scale < least_grid_steps && typical[dim / 2] > 0) return std::nullopt;
+  }
+  // The grid's window on each axis: from the axis's least value when the whole range fits in it,
+  // else centred on the robust range and moved to lie within the whole range, its start a whole
+  // number of steps.
+  const double window = scale > 0 ? top / scale : 0;
+  std::vector<double> low(least);
+  for (std::size_t a = 0; a < dim; ++a)
+    if (most[a] - least[a] > window)
+      low[a] = std::floor(std::clamp(centre[a] - 0.5 * window, least[a], most[a] - window) * scale) / scale;
   std::vector<std::uint16_t> out(n * dim);
   for (std::size_t r = 0; r < n; ++r)
     for (std::size_t a = 0; a < dim; ++a) {
-      const double x = (static_cast<double>(rows[r * dim + a]) - low[a]) * scale;  // in [0, top]
-      out[r * dim + a] = static_cast<std::uint16_t>(std::min(x + 0.5, top));       // rounded half up
+      const double x = (static_cast<double>(rows[r * dim + a]) - low[a]) * scale;
+      out[r * dim + a] = static_cast<std::uint16_t>(std::clamp(x + 0.5, 0.0, top));  // rounded half up
     }
   return out;
 }

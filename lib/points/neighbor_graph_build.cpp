@@ -30,9 +30,11 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <type_traits>
 
 #include "build_distances.hpp"
+#include "build_float_scorer.hpp"
 #include "graph_search.hpp"
 #include "key_select.hpp"
 #include "kdspace/points/detail/parallel.hpp"
@@ -109,7 +111,9 @@ class CandidateLists {
 };
 
 /// The scorer of the build for a row as the query: on quantized rows (build_distances.hpp) and on
-/// byte rows, integer arithmetic (exact; byte rows widened to 16 bits).
+/// byte rows, integer arithmetic (exact; byte rows widened to 16 bits); on rows the grid would
+/// blur (quantize_rows() returns nothing), float rows by BuildFloatScorer, double rows by the
+/// queries' exact kernel.
 template <class T, class U>
 class RowQueries {
  public:
@@ -118,6 +122,10 @@ class RowQueries {
     const U* row = rows_ + std::size_t{self} * dim_;
     if constexpr (std::is_same_v<U, std::uint16_t>) {
       return QuantizedRowScorer<T>(rows_, dim_, row);
+    } else if constexpr (std::is_same_v<U, float> && std::is_same_v<T, float>) {
+      return BuildFloatScorer(rows_, dim_, row);
+    } else if constexpr (std::is_same_v<U, T>) {
+      return RowScorer<T, U>(rows_, dim_, row);
     } else {
       static_assert(std::is_same_v<U, std::uint8_t>);
       std::copy(row, row + dim_, widened_.begin());
@@ -483,8 +491,9 @@ NeighborGraph build_neighbor_graph(const U* rows, std::size_t n, std::size_t dim
   if constexpr (std::is_same_v<U, std::uint8_t>) {
     return GraphBuilder<T, U>(rows, n, dim, params).build(tree_orders, pool_used);
   } else {
-    const std::vector<std::uint16_t> grid = quantize_rows(rows, n, dim);
-    return GraphBuilder<T, std::uint16_t>(grid.data(), n, dim, params).build(tree_orders, pool_used);
+    if (const std::optional<std::vector<std::uint16_t>> grid = quantize_rows(rows, n, dim))
+      return GraphBuilder<T, std::uint16_t>(grid->data(), n, dim, params).build(tree_orders, pool_used);
+    return GraphBuilder<T, U>(rows, n, dim, params).build(tree_orders, pool_used);
   }
 }
 
