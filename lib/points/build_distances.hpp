@@ -5,12 +5,12 @@
 // The build only compares distances with each other (the graph keeps no distance), so it may
 // compare those of a copy of the points at a finer grain than their spread: an offset per axis does
 // not change any distance, and one scale for every axis changes all of them by the same factor.
-// The scale puts the widest axis on [0, top] (more than half of it), top chosen so that a squared
-// distance fits in 32 bits (14,654 for 20 coordinates, 10,494 for 39, 2,115 for 960); the rounding then moves
-// a distance by far less than the gaps between a point's neighbours. Against float rows scored 4 coordinates
-// a vector, the build over 95k music frames (20-D) took 3% fewer instructions in all (callgrind, net of the
-// 0.08 billion the rounding costs) and about 2% less time, for the same recall at every ef within 0.0005; the
-// copy takes half the memory of float rows while the graph is built.
+// The scale puts the widest axis's robust range (quantize_rows()) on [0, top] (more than half of it), top
+// chosen so that a squared distance fits in 32 bits (14,654 for 20 coordinates, 10,494 for 39, 2,115 for
+// 960); the rounding then moves a distance by far less than the gaps between a point's neighbours. Against
+// float rows scored 4 coordinates a vector, the build over 95k music frames (20-D) took 3% fewer instructions
+// in all (callgrind, net of the 0.08 billion the rounding costs) and about 2% less time, for the same recall
+// at every ef within 0.0005; the copy takes half the memory of float rows while the graph is built.
 #pragma once
 
 #include <algorithm>
