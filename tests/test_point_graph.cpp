@@ -17,6 +17,7 @@
 #include "kdspace/metric.hpp"
 #include "kdspace/points/point_forest.hpp"
 #include "support.hpp"
+#include "../lib/points/build_distances.hpp"
 #include "../lib/points/key_select.hpp"
 
 using kdspace::ForestParams;
@@ -392,4 +393,45 @@ TEST_CASE("graph: the branch-free selection and sort of keys agree with std::sor
       REQUIRE(work == sorted);
     }
   }
+}
+
+TEMPLATE_TEST_CASE("graph: the build's 16-bit grid keeps rows that differ apart, or is not used", "[points][graph]",
+                   float, double) {
+  // Rows that differ must not share a grid row: when no finite scale can keep them apart (every
+  // robust range 0 though some axis varies, a range that overflows, or one too small for the
+  // grid), quantize_rows returns nothing and the build scores the rows themselves.
+  const std::size_t dim = 16;
+  auto keeps_apart = [&](const std::vector<TestType>& rows) {
+    const std::size_t n = rows.size() / dim;
+    const auto grid = kdspace::detail::quantize_rows(rows.data(), n, dim);
+    if (!grid) return true;
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t j = i + 1; j < n; ++j) {
+        const bool rows_differ = !std::equal(rows.begin() + static_cast<std::ptrdiff_t>(i * dim),
+                                             rows.begin() + static_cast<std::ptrdiff_t>((i + 1) * dim),
+                                             rows.begin() + static_cast<std::ptrdiff_t>(j * dim));
+        const bool grid_differs = !std::equal(grid->begin() + static_cast<std::ptrdiff_t>(i * dim),
+                                              grid->begin() + static_cast<std::ptrdiff_t>((i + 1) * dim),
+                                              grid->begin() + static_cast<std::ptrdiff_t>(j * dim));
+        if (rows_differ && !grid_differs) return false;
+      }
+    return true;
+  };
+  // Nearly all rows copies of one: 9,995 at the origin, 5 elsewhere (the sample's 0.1% tails
+  // never reach them, so every robust range is 0).
+  std::vector<TestType> copies(10000 * dim, TestType(0));
+  for (std::size_t i = 0; i < 5; ++i) copies[(2000 * i + 7) * dim + i] = static_cast<TestType>(i + 1);
+  CHECK(keeps_apart(copies));
+  // Each axis non-zero in one row of 2,000.
+  std::vector<TestType> sparse(2000 * dim, TestType(0));
+  for (std::size_t r = 0; r < 2000; r += 125) sparse[r * dim + (r / 125) % dim] = TestType(1);
+  CHECK(keeps_apart(sparse));
+  // A range wider than the largest finite value, and one narrower than the grid can scale.
+  for (const TestType half : {std::numeric_limits<TestType>::max(), std::numeric_limits<TestType>::denorm_min()}) {
+    std::vector<TestType> wide(64 * dim);
+    for (std::size_t i = 0; i < wide.size(); ++i) wide[i] = (i / dim) % 2 ? half : -half;
+    CHECK(keeps_apart(wide));
+  }
+  // All rows the same: any grid keeps nothing apart that differs.
+  CHECK(keeps_apart(std::vector<TestType>(100 * dim, TestType(3))));
 }

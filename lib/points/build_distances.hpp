@@ -78,6 +78,12 @@ std::optional<std::vector<std::uint16_t>> quantize_rows(const U* rows, std::size
   // every distance is the same multiple of their own (a power of four) and converts to T with the
   // same rounding, so points of integer values get the graph their byte rows get.
   const double scale = widest > 0 ? std::exp2(std::floor(std::log2(top / widest))) : 0;
+  // Rows that differ need a finite, positive scale: not so when every robust range is 0 though some
+  // axis varies (nearly all rows copies of one, or each axis non-zero in under 0.1% of the rows),
+  // nor when a range overflows or is too small for top / widest. The rows are then scored as they are.
+  bool varies = false;
+  for (std::size_t a = 0; a < dim; ++a) varies = varies || most[a] > least[a];
+  if (varies && !(scale > 0 && std::isfinite(scale))) return std::nullopt;
   if (dim > 0) {
     std::vector<double> typical = spread;
     std::nth_element(typical.begin(), typical.begin() + static_cast<std::ptrdiff_t>(dim / 2), typical.end());
