@@ -63,15 +63,23 @@ std::vector<Candidate<float>> make_stream(std::size_t length, int values, std::m
   return stream;
 }
 
+// Calls f(k, values, limit) for every k in [min_k, max_k], streams of 1, 3, 20 and 1000 distinct
+// values (few values: many ties), and no limit or a limit of 2.
+template <class F>
+void for_each_setting(std::size_t min_k, std::size_t max_k, F f) {
+  for (std::size_t k = min_k; k <= max_k; ++k)
+    for (int values : {1, 3, 20, 1000})
+      for (float limit : {std::numeric_limits<float>::infinity(), 2.0f}) f(k, values, limit);
+}
+
 }  // namespace
 
 TEST_CASE(
     "result sets: SortedKnnResults keeps the heap's candidates, offer by offer, ties and infinities included",
     "[points][result_sets]") {
   std::mt19937 rng(11);
-  for (std::size_t k = 1; k <= kdspace::detail::SortedKnnResults<float>::small_k; ++k)
-    for (int values : {1, 3, 20, 1000})
-      for (float limit : {std::numeric_limits<float>::infinity(), 2.0f})
+  for_each_setting(
+      1, kdspace::detail::SortedKnnResults<float>::small_k, [&](std::size_t k, int values, float limit) {
         for (std::size_t length : {std::size_t{0}, k - 1, k, 3 * k + 5}) {
           const auto stream = make_stream(length, values, rng);
           std::vector<Candidate<float>> storage;
@@ -79,6 +87,7 @@ TEST_CASE(
           INFO("k " << k << ", " << values << " values, limit " << limit << ", " << length << " offers");
           CHECK(differs_from_heap(results, k, limit, stream) == "");
         }
+      });
 }
 
 #if defined(__SSE2__)
@@ -88,9 +97,8 @@ TEST_CASE(
     "[points][result_sets]") {
   using kdspace::detail::ChunkedKnnResults;
   std::mt19937 rng(12);
-  for (std::size_t k = ChunkedKnnResults::min_k; k <= ChunkedKnnResults::max_k; ++k)
-    for (int values : {1, 3, 20, 1000})
-      for (float limit : {std::numeric_limits<float>::infinity(), 2.0f})
+  for_each_setting(
+      ChunkedKnnResults::min_k, ChunkedKnnResults::max_k, [&](std::size_t k, int values, float limit) {
         for (std::size_t length : {std::size_t{0}, k - 1, k, 3 * k + 5, 200 * k}) {
           const auto stream = make_stream(length, values, rng);
           std::vector<Candidate<float>> storage;
@@ -98,6 +106,7 @@ TEST_CASE(
           INFO("k " << k << ", " << values << " values, limit " << limit << ", " << length << " offers");
           CHECK(differs_from_heap(results, k, limit, stream) == "");
         }
+      });
 }
 
 TEST_CASE(
@@ -106,9 +115,8 @@ TEST_CASE(
     "[points][result_sets]") {
   using kdspace::detail::ChunkedKnnResults;
   std::mt19937 rng(13);
-  for (std::size_t k = ChunkedKnnResults::min_k; k <= ChunkedKnnResults::max_k; ++k)
-    for (int values : {1, 3, 20, 1000})
-      for (float limit : {std::numeric_limits<float>::infinity(), 2.0f})
+  for_each_setting(
+      ChunkedKnnResults::min_k, ChunkedKnnResults::max_k, [&](std::size_t k, int values, float limit) {
         for (std::size_t m :
              {std::size_t{1}, k - 1, k, k + 1, std::size_t{24}, ChunkedKnnResults::max_fill}) {
           const auto stream = make_stream(m + 3 * k, values, rng);
@@ -145,5 +153,6 @@ TEST_CASE(
             CHECK(got[j].index == want[j].index);
           }
         }
+      });
 }
 #endif
