@@ -542,6 +542,70 @@ TEST_CASE("rays: batches give the hits and stats of single rays on 1, 2 and 4 th
   }
 }
 
+TEST_CASE("rays: packet keys are the direction's signs, or say the ray cannot join a packet", "[rays]") {
+  using kdspace::detail::packet_key;
+  CHECK(packet_key(Ray{{1, 2, 3}, {1, 2, 3}}) == 0u);
+  CHECK(packet_key(Ray{{1, 2, 3}, {-1, 2, -3}}) == 5u);
+  CHECK(packet_key(Ray{{0, 0, 0}, {-0.5f, -2, -1e-10f}}) == 7u);
+  // Rays the float traversal turns away (fits_float_traversal), and zero components: bit 3.
+  for (const Ray& r :
+       {Ray{{0, 0, 0}, {0, 1, 1}}, Ray{{0, 0, 0}, {1, -0.0f, 1}}, Ray{{0, 0, 0}, {1, 0x1p-65f, 1}},
+        Ray{{0, 0, 0}, {1, 1, 0x1p65f}}, Ray{{0x1p63f, 0, 0}, {1, 1, 1}}, Ray{{0, -0x1p63f, 0}, {1, 1, 1}}}) {
+    CHECK(packet_key(r) >= 8u);
+    CHECK((!kdspace::detail::fits_float_traversal(r, 0x1p62f) || r.direction[0] == 0 || r.direction[1] == 0 ||
+           r.direction[2] == 0));
+  }
+  CHECK(packet_key(Ray{{0x1p62f, 0, 0}, {0x1p-64f, 0x1p64f, -0x1p64f}}) == 4u);  // the range's ends
+}
+
+TEST_CASE("rays: batches with rays that cannot join a packet give the hits of single rays", "[rays]") {
+  // A camera's rays, every few of them changed so that it cannot join a packet (a zero or tiny
+  // direction component, an origin far away): the batch traces packets of eight, four and single
+  // rays side by side, and the check of the batch takes its slower path.
+  Rng rng(26);
+  const std::vector<Box3f> boxes = kdspace::generate_boxes(3000, kdspace::SceneKind::clustered, 26);
+  const Box3f bounds = bounds_of(boxes);
+  std::vector<Ray> rays = kdspace::primary_rays(kdspace::fit_camera(bounds, 1.0), 64, 48);
+  for (std::size_t i = 0; i < rays.size(); i += static_cast<std::size_t>(3 + uniform_int(rng, 0, 20))) {
+    switch (uniform_int(rng, 0, 3)) {
+      case 0:
+        rays[i].direction[1] = 0;
+        break;
+      case 1:
+        rays[i].direction[2] = 0x1p-70f;
+        break;
+      case 2:
+        rays[i].origin[0] = -0x1p63f;
+        break;
+      default:
+        rays[i].direction[0] = -rays[i].direction[0];
+        break;
+    }
+  }
+  const BoxTree tree(boxes);
+  RayStats single_stats, batch_stats;
+  const std::vector<Hit> closest = tree.closest_hit_batch(rays, 1, &batch_stats);
+  const std::vector<Hit> any = tree.any_hit_batch(rays, 1);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const Hit c = tree.closest_hit(rays[i], 0, INFINITY, &single_stats);
+    REQUIRE(closest[i].box == c.box);
+    REQUIRE(closest[i].t == c.t);
+    REQUIRE(any[i].box == tree.any_hit(rays[i]).box);
+  }
+  CHECK(batch_stats.nodes_visited == single_stats.nodes_visited);
+  CHECK(batch_stats.boxes_tested == single_stats.boxes_tested);
+  // A ray that is not usable is named by its position, wherever it lies in the batch.
+  for (const std::size_t bad : {std::size_t{0}, std::size_t{63}, std::size_t{64}, rays.size() - 1}) {
+    std::vector<Ray> broken = rays;
+    broken[bad].direction = {0, 0, 0};
+    CHECK_THROWS_WITH(tree.closest_hit_batch(broken),
+                      Catch::Contains("ray " + std::to_string(bad + 1) + ":"));
+    broken[bad] = rays[bad];
+    broken[bad].origin[2] = NAN;
+    CHECK_THROWS_WITH(tree.any_hit_batch(broken), Catch::Contains("ray " + std::to_string(bad + 1) + ":"));
+  }
+}
+
 TEST_CASE("rays: batches over a range give the hits of single rays over it", "[rays]") {
   Rng rng(25);
   const std::vector<Box3f> boxes = kdspace::generate_boxes(2000, kdspace::SceneKind::clustered, 25);

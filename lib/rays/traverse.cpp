@@ -25,9 +25,12 @@
 //   - every comparison of a split parameter with the cell's interval widens the interval, so a hit at
 //     the boundary between two cells is seen from both.
 //
-// Batches trace four coherent rays at a time (trace_packet.cpp), the same way.
+// Batches trace four, or with AVX2 eight, coherent rays at a time (trace_packet.cpp), the same way.
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <optional>
 #include <string>
@@ -69,6 +72,51 @@ inline bool usable(const Ray& ray) {
     sum += 0.0f * ray.origin[a] + 0.0f * ray.direction[a];  // NaN if any is not finite
   const bool zero = ray.direction[0] == 0 && ray.direction[1] == 0 && ray.direction[2] == 0;
   return sum == 0 && !zero;
+}
+
+/// What the check of a batch found: the position of its first ray that is not usable() (n when
+/// all are), and whether every ray has every origin component within +-2^62 and every direction
+/// component of magnitude at least 2^-64: then a ray's detail::packet_key is just its signs.
+struct BatchCheck {
+  std::size_t first_unusable;
+  bool all_in_packet_range;
+};
+
+/// A batch checks every ray before it traces any. Bit operations over blocks of rays, without a
+/// branch a ray, make that cheap beside a camera ray's packet traversal (where the checks with
+/// branches cost a sixth of its instructions: callgrind).
+BatchCheck check_batch(const Ray* rays, std::size_t n) {
+  using detail::power_of_two_bits;
+  constexpr std::size_t block = 64;
+  constexpr std::uint32_t exponent = 0x7f800000u, magnitude = 0x7fffffffu;
+  std::uint32_t bits[block * 6];
+  std::uint32_t out_of_range = 0;
+  for (std::size_t begin = 0; begin < n; begin += block) {
+    const std::size_t count = std::min(block, n - begin);
+    std::memcpy(bits, rays + begin, count * sizeof(Ray));
+    std::uint32_t bad = 0;
+    for (std::size_t w = 0; w < 6 * count; ++w) {
+      bad |= static_cast<std::uint32_t>((bits[w] & exponent) == exponent);  // +-inf or NaN
+      out_of_range |= static_cast<std::uint32_t>((bits[w] & magnitude) > power_of_two_bits(62));
+    }
+    for (std::size_t r = 0; r < count; ++r) {
+      const std::uint32_t* direction = bits + 6 * r + 3;
+      bad |= static_cast<std::uint32_t>(((direction[0] | direction[1] | direction[2]) & magnitude) == 0);
+      for (int a = 0; a < 3; ++a)
+        out_of_range |= static_cast<std::uint32_t>((direction[a] & magnitude) < power_of_two_bits(-64));
+    }
+    if (bad != 0)
+      for (std::size_t r = begin; r < begin + count; ++r)
+        if (!usable(rays[r])) return BatchCheck{r, false};
+  }
+  return BatchCheck{n, out_of_range == 0};
+}
+
+/// detail::packet_key of a ray whose components are all in the packet range (BatchCheck): its signs.
+inline std::uint32_t sign_key(const Ray& ray) {
+  std::uint32_t direction[3];
+  std::memcpy(direction, ray.direction.data(), sizeof direction);
+  return direction[0] >> 31 | (direction[1] >> 31) << 1 | (direction[2] >> 31) << 2;
 }
 
 void check_ray(const Ray& ray) {
@@ -221,7 +269,8 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
                                       RayStats* stats) const {
   if (n > 0 && rays == nullptr) throw Error("rays: null pointer");
   check_range(range.t_min, range.t_max);
-  for (std::size_t i = 0; i < n; ++i) {
+  const BatchCheck checked = check_batch(rays, n);
+  for (std::size_t i = checked.first_unusable; i < n; ++i) {
     if (usable(rays[i])) continue;
     const std::string problem = ray_problem(rays[i]);
     if (!problem.empty()) throw Error("ray " + std::to_string(i + 1) + ": " + problem);
@@ -229,18 +278,50 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
   std::vector<Hit> hits(n);
   const unsigned workers = detail::resolve_threads(threads);
   std::vector<RayStats> per_worker(workers);
+#if defined(__SSE2__)
+  const bool packets = float_range_ && !boxes_.empty();  // trace_packet's conditions on the tree
+#else
+  const bool packets = false;
+#endif
+  const bool wide_packets = packets && detail::avx2_dispatch();
   detail::parallel_for(n, workers, 256, [&](std::size_t begin, std::size_t end, unsigned worker) {
     RayStats local;
-    // Four rays that run the same way (coherent rays: a camera's neighbouring pixels) go through the
-    // tree together; the others one by one. Both give the same hits and statistics.
-    std::size_t i = begin;
-    for (; i + 4 <= end; i += 4) {
-      if (packet_fits(rays + i)) {
-        trace_packet<AnyHit>(rays + i, range, hits.data() + i, local);
+    const auto trace_four = [&](std::size_t first, bool together) {
+      if (together) {
+        trace_packet<AnyHit>(rays + first, 4, range, hits.data() + first, local);
       } else {
-        for (std::size_t k = i; k < i + 4; ++k)
+        for (std::size_t k = first; k < first + 4; ++k)
           hits[k] = trace_any_precision<AnyHit>(rays[k], range.t_min, range.t_max, local);
       }
+    };
+    // Eight (with AVX2) or four consecutive rays that run the same way (equal detail::packet_key:
+    // coherent rays, a camera's neighbouring pixels) go through the tree together; the others one
+    // by one. All give the same hits and statistics.
+    const auto packet_key = [&checked](const Ray& ray) {
+      return checked.all_in_packet_range ? sign_key(ray) : detail::packet_key(ray);
+    };
+    std::size_t i = begin;
+    std::uint32_t key[8];
+    // 0 when rays[first .. first + 4) can form a packet: their keys are equal and below 8.
+    const auto misfit_four = [&key](int first) {
+      std::uint32_t differ = key[first] >> 3;
+      for (int l = first + 1; l < first + 4; ++l) differ |= key[l] ^ key[first];
+      return differ;
+    };
+    for (; i + 8 <= end; i += 8) {
+      for (int l = 0; l < 8; ++l) key[l] = packet_key(rays[i + static_cast<std::size_t>(l)]);
+      const bool first = packets && misfit_four(0) == 0, second = packets && misfit_four(4) == 0;
+      if (wide_packets && first && second && key[0] == key[4]) {
+        trace_packet<AnyHit>(rays + i, 8, range, hits.data() + i, local);
+      } else {
+        trace_four(i, first);
+        trace_four(i + 4, second);
+      }
+    }
+    if (i + 4 <= end) {
+      for (int l = 0; l < 4; ++l) key[l] = packet_key(rays[i + static_cast<std::size_t>(l)]);
+      trace_four(i, packets && misfit_four(0) == 0);
+      i += 4;
     }
     for (; i < end; ++i) hits[i] = trace_any_precision<AnyHit>(rays[i], range.t_min, range.t_max, local);
     per_worker[worker] += local;

@@ -310,11 +310,11 @@ class BoxTree {
   template <bool AnyHit>
   std::vector<Hit> trace_batch(const Ray* rays, std::size_t n, RayRange range, unsigned threads,
                                RayStats* stats) const;
-  /// True when rays[0 .. 4) can be traced together (packet_rays in trace_packet.cpp).
-  bool packet_fits(const Ray* rays) const;
-  /// Traces rays[0 .. 4) together over `range`: the hits and statistics of four single traces.
+  /// Traces rays[0 .. width) together over `range` (width 4, or 8 where avx2_dispatch()): the hits
+  /// and statistics of `width` single traces. For a tree with boxes and float_range_, and rays whose
+  /// detail::packet_key is the same and below 8.
   template <bool AnyHit>
-  void trace_packet(const Ray* rays, RayRange range, Hit* hits, RayStats& stats) const;
+  void trace_packet(const Ray* rays, int width, RayRange range, Hit* hits, RayStats& stats) const;
   void compute_stats();
   void compute_bounds();  ///< bounds_ := the union of the boxes
   void set_bounds(const Box3f& bounds);
