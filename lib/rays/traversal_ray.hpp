@@ -137,6 +137,7 @@ struct TraversalRay {
   __m128 origin4[3], inverse4[3];  ///< float only: the same, in every lane
 #endif
 
+  TraversalRay() = default;  ///< uninitialized: for arrays filled on demand (packets)
   explicit TraversalRay(const Ray& r) {
     for (int a = 0; a < 3; ++a) {
       origin[a] = static_cast<Real>(r.origin[a]);
