@@ -4,8 +4,8 @@
 // Contenders
 //   kdspace          BoxTree with the default build (sah_nlogn, one thread); closest_hit_batch for
 //                    closest hits, any_hit_batch over [1e-4, 1] for shadow rays. The batches trace
-//                    four rays at a time where four neighbours' directions share their signs
-//                    (packets: camera and shadow rays mostly), the other rays one by one.
+//                    eight rays at a time (AVX2; else four) where neighbours' directions share their
+//                    signs (packets: camera and shadow rays mostly), the other rays one by one.
 //   embree-user-Q    Embree user geometry (RTC_GEOMETRY_TYPE_USER), one primitive per box: the bounds
 //                    callback returns the box, the intersect callback runs kdspace's closed slab test
 //                    (double precision from the float data, t rounded to float; a ray starting inside
@@ -1076,8 +1076,7 @@ int main(int argc, char** argv) {
               rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_PATCH));
   std::printf(
       "kdspace: BoxTree default build (sah_nlogn, 1 thread), closest_hit_batch and any_hit_batch (packets of "
-      "4 "
-      "coherent rays). Embree: "
+      "8 coherent rays with AVX2, else 4). Embree: "
       "device \"threads=1\" (builds on 1 thread; tasking %s; backface culling %s), rtcIntersect1 / "
       "rtcOccluded1 "
       "per ray; user geometry = boxes with kdspace's slab test in the callbacks; tri = 12 triangles per box. "
