@@ -1,16 +1,18 @@
-// Four rays through the BoxTree at once: the packet traversal of Wald, Slusallek, Benthin & Wagner
-// (2001, "Interactive rendering with coherent ray tracing"), for the batches' coherent rays.
+// Eight (AVX2) or four (SSE) rays through the BoxTree at once: the packet traversal of Wald,
+// Slusallek, Benthin & Wagner (2001, "Interactive rendering with coherent ray tracing"), for the
+// batches' coherent rays.
 //
-// Four rays whose direction components have the same signs (the neighbouring pixels of a camera)
-// agree at every node on which child is near and which far, so they can walk the tree together:
-// one node load and one decision for four rays, each ray with its own interval [t_entry, t_exit] in
-// one SSE lane. A child is entered when some ray needs it, with the rays that do; a ray that needs
-// neither child of a node, or whose best hit lies before a pending cell, drops out of that subtree.
-// So each ray visits exactly the cells, in the same order, that its own single traversal
-// (traverse.cpp) would, with the same widened comparisons, and tests the same boxes with the same
-// filter and the same double test: the hits and the statistics are those of four single traces.
-// Rays that do not fit (different signs, a zero component, parameters beyond the float range:
-// detail::packet_key) are traced one by one.
+// Rays whose direction components have the same signs (the neighbouring pixels of a camera) agree
+// at every node on which child is near and which far, so they can walk the tree together: one node
+// load and one decision for all of them, each ray with its own interval [t_entry, t_exit] in one
+// lane of a register. A child is entered when some ray needs it, with the rays that do; a ray that
+// needs neither child of a node, or whose best hit lies before a pending cell, drops out of that
+// subtree. So each ray visits exactly the cells, in the same order, that its own single traversal
+// (traverse.cpp) would, with the same widened comparisons, and meets each leaf's boxes in the same
+// order, through the same float filter (ray by ray eight or four boxes at a time, or box by box for
+// all the rays at once) and the same double test: the hits and the statistics are those of single
+// traces. Rays that do not fit (different signs, a zero component, parameters beyond the float
+// range: detail::packet_key) are traced one by one.
 #include <array>
 #include <cmath>
 #include <cstdint>
