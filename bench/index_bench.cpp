@@ -8,7 +8,10 @@
 //     cache (warm), as an index kept on a server is. Then where a mapped load's time goes, each part
 //     alone (min of the repetitions): opening and mapping, every checksum (one thread), the
 //     structural checks of the kind's loader (two threads for a large point tree or box tree, one
-//     for a forest), and reading the mapped bytes once (one thread: the floor).
+//     for a forest), and reading the mapped bytes once (one thread: the floor), with the minor page
+//     faults of a mapped load and the cost of starting a thread. The builds above run on one thread
+//     (BuildParams::threads, 1 by default), the large point tree's and box tree's loads on two; so
+//     last, the point tree's build and mapped load each on one thread and on two, like with like.
 //  2. Updates. 1e6 uniform 3-D points, then churn: 500,000 random points removed one at a time and
 //     500,000 new ones inserted, half one at a time and half in batches of 1,000, interleaved across
 //     libraries in rounds of 50,000 operations: kdspace's DynamicPointTree, nanoflann's
@@ -29,6 +32,7 @@
 #include <fcntl.h>
 #include <hnswlib/hnswlib.h>
 #include <sys/mman.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -111,11 +115,31 @@ struct LoadRow {
   std::size_t n = 0;
   double build_s = 0, save_s = 0, file_mb = 0, map_s = 0, read_s = 0;
   double open_s = 0, checksums_s = 0, structure_s = 0, touch_s = 0;  // the parts, alone, min
+  double faults = 0;  // minor page faults of a whole mapped load (mean)
   bool same = false;
 };
 
 double minimum(const std::vector<double>& v) {
   return *std::min_element(v.begin(), v.end());
+}
+
+// Minor page faults of this process so far (all threads).
+long minor_faults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
+}
+
+// Seconds to start a thread that does nothing and join it (kdspace::detail::fork_join, as the
+// two-thread checks start theirs): min of `reps`.
+double thread_start_s(int reps) {
+  std::vector<double> s;
+  for (int r = 0; r < std::max(reps, 20); ++r) {
+    const Clock::time_point start = Clock::now();
+    kdspace::detail::fork_join([] {}, [] {});
+    s.push_back(seconds_since(start));
+  }
+  return minimum(s);
 }
 
 // Seconds to map `path` and sum every 8-byte word of it: a mapped load's floor (it reads each byte).
@@ -179,26 +203,67 @@ LoadRow load_against_build(const std::string& what, std::size_t n, const std::st
   row.file_mb = dbl(std::filesystem::file_size(path)) / 1e6;
   std::vector<double> map_s, read_s;
   row.same = true;
+  long faults = 0;
   for (int r = 0; r < reps; ++r) {
     for (auto mode : {kdspace::io::LoadMode::map, kdspace::io::LoadMode::read}) {
+      const long faults_before = minor_faults();
       start = Clock::now();
       const Index loaded = load(path, mode);
       (mode == kdspace::io::LoadMode::map ? map_s : read_s).push_back(seconds_since(start));
+      if (mode == kdspace::io::LoadMode::map) faults += minor_faults() - faults_before;
       if (r == 0) row.same = row.same && same(built, loaded);
     }
   }
+  row.faults = static_cast<double>(faults) / reps;
   row.map_s = median(map_s);
   row.read_s = median(read_s);
   time_parts(row, path, reps, load_file);
   all_agree = all_agree && row.same;
   std::filesystem::remove(path);
-  json("\"part\": \"load\", \"index\": \"" + what + "\", \"n\": " + std::to_string(n) +
-       ", \"build_s\": " + num(row.build_s) + ", \"save_s\": " + num(row.save_s) +
-       ", \"file_mb\": " + num(row.file_mb) + ", \"load_map_s\": " + num(row.map_s) +
-       ", \"load_read_s\": " + num(row.read_s) + ", \"open_s\": " + num(row.open_s) +
-       ", \"checksums_s\": " + num(row.checksums_s) + ", \"structure_s\": " + num(row.structure_s) +
-       ", \"read_mapped_s\": " + num(row.touch_s) + ", \"same_answers\": " + (row.same ? "true" : "false"));
+  json("\"part\": \"load\", \"index\": \"" + what + "\", \"n\": " + std::to_string(n) + ", \"build_s\": " +
+       num(row.build_s) + ", \"save_s\": " + num(row.save_s) + ", \"file_mb\": " + num(row.file_mb) +
+       ", \"load_map_s\": " + num(row.map_s) + ", \"load_read_s\": " + num(row.read_s) +
+       ", \"open_s\": " + num(row.open_s) + ", \"checksums_s\": " + num(row.checksums_s) +
+       ", \"structure_s\": " + num(row.structure_s) + ", \"read_mapped_s\": " + num(row.touch_s) +
+       ", \"faults\": " + num(row.faults) + ", \"same_answers\": " + (row.same ? "true" : "false"));
   return row;
+}
+
+// The point tree's build and mapped load on one thread and on two, like with like: the build's
+// BuildParams::threads (1 by default) against load_point_tree(path, map, threads); builds and loads
+// interleaved, median of `reps` each.
+void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
+  const auto base = uniform_points(n, 3, 1);
+  const std::string path = dir + "/bench-tree-threads.kdx";
+  using Tree = kdspace::PointTree<float>;
+  std::vector<double> build_s[2], load_s[2];
+  for (int r = 0; r < reps; ++r) {
+    for (unsigned threads : {1u, 2u}) {
+      kdspace::BuildParams params;
+      params.threads = threads;
+      const Clock::time_point start = Clock::now();
+      const Tree tree(base.data(), n, 3, params);
+      build_s[threads - 1].push_back(seconds_since(start));
+      if (r == 0 && threads == 1) kdspace::io::save(path, tree);
+    }
+    for (unsigned threads : {1u, 2u}) {
+      const Clock::time_point start = Clock::now();
+      const Tree loaded = kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, threads);
+      load_s[threads - 1].push_back(seconds_since(start));
+    }
+  }
+  std::filesystem::remove(path);
+  std::printf(
+      "\n### PointTree, %zu uniform 3-D float points: build and mapped load on one thread and on two "
+      "(median of %d each, interleaved)\n\n"
+      "| threads | build s | load, mapped ms | load ÷ build |\n|---:|---:|---:|---:|\n",
+      n, reps);
+  for (unsigned t : {1u, 2u}) {
+    const double build = median(build_s[t - 1]), load = median(load_s[t - 1]);
+    std::printf("| %u | %.4f | %.3f | %.2f%% |\n", t, build, 1e3 * load, 100 * load / build);
+    json("\"part\": \"load_threads\", \"index\": \"PointTree, uniform 3-D float\", \"threads\": " +
+         std::to_string(t) + ", \"build_s\": " + num(build) + ", \"load_map_s\": " + num(load));
+  }
 }
 
 void part_load(std::size_t scale, int reps, const std::string& dir) {
@@ -278,13 +343,16 @@ void part_load(std::size_t scale, int reps, const std::string& dir) {
       "chunks that both threads share; a forest checks its structure on one thread while a second\n"
       "takes the checksums, and both share what is left.\n\n",
       reps);
+  const double thread_ms = 1e3 * thread_start_s(reps);
   std::printf(
-      "| index | open and map ms | checksums ms | structural checks ms | read every mapped byte ms (floor) "
-      "|\n"
-      "|---|---:|---:|---:|---:|\n");
+      "| index | open and map ms | page faults a load | checksums ms | structural checks ms | "
+      "thread start ms | read every mapped byte ms (floor) |\n"
+      "|---|---:|---:|---:|---:|---:|---:|\n");
   for (const LoadRow& r : rows)
-    std::printf("| %s | %.3f | %.3f | %.3f | %.3f |\n", r.what.c_str(), 1e3 * r.open_s, 1e3 * r.checksums_s,
-                1e3 * r.structure_s, 1e3 * r.touch_s);
+    std::printf("| %s | %.3f | %.0f | %.3f | %.3f | %.3f | %.3f |\n", r.what.c_str(), 1e3 * r.open_s,
+                r.faults, 1e3 * r.checksums_s, 1e3 * r.structure_s, thread_ms, 1e3 * r.touch_s);
+  json("\"part\": \"load\", \"thread_start_s\": " + num(thread_ms / 1e3));
+  point_tree_threads(n, reps, dir);
 }
 
 // ---- 2. and 3. updates, and queries after churn ---------------------------------------------------------

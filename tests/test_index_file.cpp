@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -427,10 +428,14 @@ TEST_CASE(
         return id;
     return node_array.size();
   };
+  // The same message whether the check runs on two threads or on one (threads 1).
   auto load_changed = [&](std::vector<unsigned char> changed) {
     io::reseal_index_bytes(changed);
     write_bytes(path, changed);
-    return error_message([&] { io::load_point_tree<float>(path); });
+    const std::string alone = error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, 1); });
+    const std::string message = error_message([&] { io::load_point_tree<float>(path); });
+    CHECK(alone == message);
+    return message;
   };
   for (std::size_t row : {std::size_t{0}, n / 2 - 1, n / 2, n / 2 + 1, n - 1}) {
     CAPTURE(row);
@@ -448,6 +453,55 @@ TEST_CASE(
         0);
   write_bytes(path, bytes);
   require_same_nodes(io::load_point_tree<float>(path), tree);
+  require_same_nodes(io::load_point_tree<float>(path, io::LoadMode::map, 1), tree);
+}
+
+TEST_CASE("index: the check's wide kernels decide as the baseline loops do", "[index]") {
+  // 3-D float leaves of 8 to 40 points against their cell (every coordinate moved below or above it,
+  // or made NaN, in turn), and the order's bits, with the AVX2 and BMI2 kernels against plain loops.
+#if defined(KDSPACE_AVX2_DISPATCH)
+  if (kdspace::detail::tree_check_kernels()) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u(-1.f, 1.f);
+    const float lo[4] = {-1.f, -1.f, -1.f, 0.f}, hi[4] = {1.f, 1.f, 1.f, 0.f};
+    auto plain = [&](const std::vector<float>& rows) {
+      bool ok = true;
+      for (std::size_t i = 0; i < rows.size(); ++i) ok = ok && lo[i % 3] <= rows[i] && rows[i] <= hi[i % 3];
+      return ok;
+    };
+    for (std::size_t count = 8; count <= 40; ++count) {
+      std::vector<float> rows(3 * count);
+      for (float& v : rows) v = u(rng);
+      rows[0] = -1.f;  // on the cell's faces: inside
+      rows[3 * count - 1] = 1.f;
+      REQUIRE(kdspace::detail::points3_inside_avx2(rows.data(), count, lo, hi));
+      for (std::size_t i = 0; i < rows.size(); ++i)
+        for (float bad : {-1.0001f, 1.0001f, std::numeric_limits<float>::quiet_NaN()}) {
+          CAPTURE(count, i, bad);
+          const float kept = rows[i];
+          rows[i] = bad;
+          REQUIRE(!plain(rows));
+          REQUIRE(!kdspace::detail::points3_inside_avx2(rows.data(), count, lo, hi));
+          rows[i] = kept;
+        }
+    }
+    for (std::size_t count :
+         {std::size_t{0}, std::size_t{1}, std::size_t{5}, std::size_t{8}, std::size_t{1000}})
+      for (bool in_range : {true, false}) {
+        CAPTURE(count, in_range);
+        const auto n = static_cast<std::uint32_t>(count + 3);
+        std::vector<std::uint32_t> values(count);
+        for (auto& v : values) v = static_cast<std::uint32_t>(rng() % n);
+        if (!in_range) values.push_back(rng() % 2 ? n : 0xffffffffu);
+        std::vector<std::uint64_t> wide(n / 64 + 1, 0), narrow(n / 64 + 1, 0);
+        if (in_range)
+          for (std::uint32_t v : values) narrow[v >> 6] |= std::uint64_t{1} << (v & 63);
+        CHECK(kdspace::detail::mark_values_avx2(values.data(), values.size(), n, wide.data()) == in_range);
+        if (in_range) CHECK(wide == narrow);
+      }
+  }
+#endif
+  SUCCEED("without AVX2 and BMI2 only the baseline loops run");
 }
 
 TEST_CASE("index: a full disk mid-save leaves the old file intact, and no temporary file",

@@ -199,7 +199,7 @@ auto load_beside_checksums(const IndexFile& file, const std::vector<SectionCheck
 
 template <class T, int Dim, class Metric>
 PointTree<T, Dim, Metric> point_tree_of(const std::shared_ptr<const IndexFile>& file,
-                                        kdspace::detail::CheckCompanion* companion) {
+                                        kdspace::detail::CheckCompanion* companion, unsigned threads = 2) {
   detail::expect_header(*file, {IndexKind::point_tree}, detail::scalar_of<T>(), detail::metric_of<Metric>(),
                         Dim == Dynamic ? 0 : static_cast<std::size_t>(Dim));
   auto parts = detail::tree_sections<T>(file, 0, detail::read_point_tree_params(*file));
@@ -207,6 +207,7 @@ PointTree<T, Dim, Metric> point_tree_of(const std::shared_ptr<const IndexFile>& 
     file->fail("the header says " + std::to_string(file->info().count) + " points, the tree holds " +
                std::to_string(parts.order.size()));
   parts.companion = companion;
+  parts.check_threads = threads;
   try {
     return PointTree<T, Dim, Metric>(std::move(parts), detail::metric_from<Metric>(*file));
   } catch (const Error& e) {
@@ -233,19 +234,23 @@ PointTree<T, Dim, Metric> load_point_tree(const std::shared_ptr<const IndexFile>
 }
 
 /// Loads a point tree from a file opened with Checksums::deferred, whose checksums its structural check
-/// takes on its own threads (what load_point_tree(path) does once it has opened the file).
+/// takes on its own threads (what load_point_tree(path) does once it has opened the file). `threads`:
+/// 1 checks on the calling thread alone; 2 or more on two threads for a tree of 131,072 points or
+/// more (kdspace::detail::parallel_tree_check; the check divides in two, no more).
 template <class T, int Dim = Dynamic, class Metric = L2>
-PointTree<T, Dim, Metric> load_point_tree_deferred(const std::shared_ptr<const IndexFile>& file) {
+PointTree<T, Dim, Metric> load_point_tree_deferred(const std::shared_ptr<const IndexFile>& file,
+                                                   unsigned threads = 2) {
   return detail::load_beside_checksums(
       *file, detail::point_tree_readers(*file, static_cast<std::size_t>(file->info().dim) * sizeof(T)),
       [&](kdspace::detail::CheckCompanion* checksums) {
-        return detail::point_tree_of<T, Dim, Metric>(file, checksums);
+        return detail::point_tree_of<T, Dim, Metric>(file, checksums, threads);
       });
 }
 
 template <class T, int Dim = Dynamic, class Metric = L2>
-PointTree<T, Dim, Metric> load_point_tree(const std::string& path, LoadMode mode = LoadMode::map) {
-  return load_point_tree_deferred<T, Dim, Metric>(IndexFile::open(path, mode, Checksums::deferred));
+PointTree<T, Dim, Metric> load_point_tree(const std::string& path, LoadMode mode = LoadMode::map,
+                                          unsigned threads = 2) {
+  return load_point_tree_deferred<T, Dim, Metric>(IndexFile::open(path, mode, Checksums::deferred), threads);
 }
 
 // ---- DynamicPointTree ----------------------------------------------------------------------------------

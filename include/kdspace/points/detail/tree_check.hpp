@@ -32,6 +32,7 @@
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/node.hpp"
 #include "kdspace/points/detail/parallel.hpp"
+#include "kdspace/points/detail/tree_check_kernels.hpp"
 #include "kdspace/points/params.hpp"
 
 namespace kdspace::detail {
@@ -54,6 +55,7 @@ struct PointTreeParts {
   std::vector<T> root_lo, root_hi;  ///< bounds of all points (the root cell)
   std::shared_ptr<const void> backing;
   CheckCompanion* companion = nullptr;  ///< work the check runs beside (not owned; used while it runs)
+  unsigned check_threads = 2;           ///< 1: the check runs on the calling thread alone
 };
 
 /// What the check works out on the way: the figures a PointTree keeps besides its arrays.
@@ -63,13 +65,14 @@ struct TreeShape {
 };
 
 /// Trees of at least this many points are checked on two threads (a thread's start costs tens of
-/// microseconds, the check a few nanoseconds a point).
+/// microseconds, the check a few nanoseconds a point), unless PointTreeParts::check_threads is 1.
 inline constexpr std::size_t parallel_tree_check = std::size_t{1} << 17;
 
 template <class T>
 class TreeChecker {
  public:
-  explicit TreeChecker(const PointTreeParts<T>& p) : p_(p), n_(p.order.size()), dim_(p.dim) {}
+  explicit TreeChecker(const PointTreeParts<T>& p)
+      : p_(p), n_(p.order.size()), dim_(p.dim), kernels_(tree_check_kernels()) {}
 
   TreeShape run() {
     if (dim_ == 0) fail("dimension 0");
@@ -86,7 +89,7 @@ class TreeChecker {
     for (std::size_t a = 0; a < dim_; ++a)
       if (!std::isfinite(p_.root_lo[a]) || !std::isfinite(p_.root_hi[a]) || p_.root_lo[a] > p_.root_hi[a])
         fail("bounds of coordinate " + std::to_string(a + 1) + " are not finite and ordered");
-    if (n_ >= parallel_tree_check) {
+    if (n_ >= parallel_tree_check && p_.check_threads > 1) {
       try {
         if (std::optional<TreeShape> shape = run_on_two_threads()) return *shape;
       } catch (const Error&) {
@@ -103,17 +106,27 @@ class TreeChecker {
     fail("node " + std::to_string(id) + ": " + what);
   }
 
+  // An inner node above the one being visited: its cell's bounds on its axis before its split, and
+  // whether its right side is being visited.
+  struct Frame {
+    std::size_t id, axis;
+    T saved_lo, saved_hi;
+    bool right;
+  };
+
   // A depth-first walk over one subtree after another, in node order, each in its cell, checking
   // that nodes and the leaves' points follow each other without a gap; then the order of its rows.
   struct Walk {
     int id = 0;                  // 0 or 1: which of the companion's streams it reads
-    std::vector<T> lo, hi;       // the root cell cut by the splits above the node being visited
+    std::vector<T> lo, hi;       // the root cell cut by the splits above the node being visited, and
+                                 // one coordinate more (unused: the 3-D check loads four at once)
     std::size_t next_node = 0;   // the node the next visit must find
     std::size_t next_point = 0;  // the point the next leaf must start at
     TreeShape shape;
     CheckCompanion* companion = nullptr;
     std::size_t rows_ready = 0, nodes_ready = 0;  // what the companion has made ready to read
     std::vector<std::uint64_t> seen;              // the order's values of its rows, as bits (mark_order)
+    std::vector<Frame> stack = std::vector<Frame>(max_tree_depth + 1);  // visit's: one frame a level
   };
 
   // A subtree one walk checks whole: its root, depth and cell, and where it ends (set by the walk).
@@ -131,6 +144,8 @@ class TreeChecker {
     Walk walk;
     walk.lo = p_.root_lo;
     walk.hi = p_.root_hi;
+    walk.lo.resize(dim_ + 1);  // a padding coordinate: the 3-D check loads four
+    walk.hi.resize(dim_ + 1);
     walk.companion = companion;
     walk.seen.assign(n_ / 64 + 1, 0);
     visit(walk, 0);
@@ -200,8 +215,8 @@ class TreeChecker {
     auto share = [&](int w) {
       Walk walk;
       walk.id = w;
-      walk.lo.resize(dim_);
-      walk.hi.resize(dim_);
+      walk.lo.resize(dim_ + 1);  // a padding coordinate: the 3-D check loads four
+      walk.hi.resize(dim_ + 1);
       walk.companion = p_.companion;
       walk.next_point = w == 0 ? 0 : split_point;
       walk.seen.assign(n_ / 64 + 1, 0);
@@ -275,6 +290,14 @@ class TreeChecker {
     for (std::size_t i = begin; i < end;) {
       const std::size_t ready =
           walk.companion ? std::clamp(walk.companion->ready(check_rows, walk.id, i + 1), i + 1, end) : end;
+#if defined(KDSPACE_AVX2_DISPATCH)
+      if (kernels_) {
+        // A value out of range: bit n, which fails the check.
+        if (!mark_values_avx2(order + i, ready - i, n, bits)) bits[n >> 6] |= std::uint64_t{1} << (n & 63);
+        i = ready;
+        continue;
+      }
+#endif
       for (; i + 4 <= ready; i += 4) {  // four independent updates a step: a third faster than one
         mark(order[i]);
         mark(order[i + 1]);
@@ -299,29 +322,50 @@ class TreeChecker {
     fail("the order is no permutation");
   }
 
+  // Checks the subtree whose root is walk.next_node, at `depth`, in the cell walk.lo / walk.hi, node by
+  // node in storage order (depth first): a loop over the nodes with a stack of the inner nodes above
+  // the one visited, instead of a call a node (the calls took a third of the check's instructions).
   void visit(Walk& walk, std::size_t depth) {
-    const std::size_t id = walk.next_node++;
-    if (id >= p_.nodes.size()) fail("a right child lies past the last node");
-    if (id >= walk.nodes_ready && walk.companion)
-      walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
-    if (depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
-    const PointNode<T>& node = p_.nodes[id];
-    if (node.is_leaf()) return visit_leaf(walk, id, node, depth);
-    const std::size_t axis = node.axis();
-    if (axis >= dim_) fail_node(id, "split axis " + std::to_string(axis) + " is not below the dimension");
-    if (std::isnan(node.left_max) || std::isnan(node.right_min) || node.left_max > node.right_min)
-      fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) +
-                        ", right_min " + std::to_string(node.right_min) + ")");
-    const T saved_hi = walk.hi[axis], saved_lo = walk.lo[axis];
-    walk.hi[axis] = std::min(walk.hi[axis], node.left_max);
-    visit(walk, depth + 1);
-    walk.hi[axis] = saved_hi;
-    if (node.right_child() != walk.next_node)
-      fail_node(id, "right child " + std::to_string(node.right_child()) + ", expected " +
-                        std::to_string(walk.next_node));
-    walk.lo[axis] = std::max(walk.lo[axis], node.right_min);
-    visit(walk, depth + 1);
-    walk.lo[axis] = saved_lo;
+    const PointNode<T>* nodes = p_.nodes.data();
+    const std::size_t node_count = p_.nodes.size();
+    Frame* stack = walk.stack.data();
+    std::size_t top = 0;  // frames in use: the inner nodes above the next one
+    for (;;) {
+      const std::size_t id = walk.next_node++;
+      const std::size_t node_depth = depth + top;
+      if (id >= node_count) fail("a right child lies past the last node");
+      if (id >= walk.nodes_ready && walk.companion)
+        walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
+      if (node_depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
+      const PointNode<T>& node = nodes[id];
+      if (!node.is_leaf()) {  // down its left side, in the cell below left_max
+        const std::size_t axis = node.axis();
+        if (axis >= dim_) fail_node(id, "split axis " + std::to_string(axis) + " is not below the dimension");
+        if (!(node.left_max <= node.right_min))  // false too when either is NaN
+          fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) +
+                            ", right_min " + std::to_string(node.right_min) + ")");
+        stack[top++] = {id, axis, walk.lo[axis], walk.hi[axis], false};
+        walk.hi[axis] = std::min(walk.hi[axis], node.left_max);
+        continue;
+      }
+      visit_leaf(walk, id, node, node_depth);
+      // Up to the nearest node whose right side is still to come; its right child must be next.
+      for (;; --top) {
+        if (top == 0) return;
+        Frame& f = stack[top - 1];
+        if (!f.right) {
+          walk.hi[f.axis] = f.saved_hi;
+          const PointNode<T>& up = nodes[f.id];
+          if (up.right_child() != walk.next_node)
+            fail_node(f.id, "right child " + std::to_string(up.right_child()) + ", expected " +
+                                std::to_string(walk.next_node));
+          walk.lo[f.axis] = std::max(walk.lo[f.axis], up.right_min);
+          f.right = true;
+          break;
+        }
+        walk.lo[f.axis] = f.saved_lo;
+      }
+    }
   }
 
   void visit_leaf(Walk& walk, std::size_t id, const PointNode<T>& leaf, std::size_t depth) {
@@ -374,13 +418,18 @@ class TreeChecker {
     // whatever r (r of them checked a second time), so no loop runs on the last few; a leaf of fewer
     // than four points goes through the scalar loop.
     if constexpr (D == 3 && std::is_same_v<T, float>) {
+#if defined(KDSPACE_AVX2_DISPATCH)
+      if (count >= 8 && kernels_) return points3_inside_avx2(rows, count, lo, hi);
+#endif
       if (count >= 4) {
-        const __m128 lo0 = _mm_setr_ps(lo[0], lo[1], lo[2], lo[0]),
-                     hi0 = _mm_setr_ps(hi[0], hi[1], hi[2], hi[0]);
-        const __m128 lo1 = _mm_setr_ps(lo[1], lo[2], lo[0], lo[1]),
-                     hi1 = _mm_setr_ps(hi[1], hi[2], hi[0], hi[1]);
-        const __m128 lo2 = _mm_setr_ps(lo[2], lo[0], lo[1], lo[2]),
-                     hi2 = _mm_setr_ps(hi[2], hi[0], hi[1], hi[2]);
+        // The cell's four loaded coordinates (x y z, then the padding) into the three lane orders.
+        const __m128 cell_lo = _mm_loadu_ps(lo), cell_hi = _mm_loadu_ps(hi);
+        const __m128 lo0 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(0, 2, 1, 0)),
+                     hi0 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(0, 2, 1, 0));
+        const __m128 lo1 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(1, 0, 2, 1)),
+                     hi1 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(1, 0, 2, 1));
+        const __m128 lo2 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(2, 1, 0, 2)),
+                     hi2 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(2, 1, 0, 2));
         const auto within = [](__m128 low, __m128 p, __m128 high) {
           return _mm_and_ps(_mm_cmple_ps(low, p), _mm_cmple_ps(p, high));
         };
@@ -405,6 +454,7 @@ class TreeChecker {
 
   const PointTreeParts<T>& p_;
   std::size_t n_, dim_;
+  bool kernels_;  // tree_check_kernels(), read once
 };
 
 /// Checks parts from outside (see the top of this file); throws Error("point tree: node 12: ...").
