@@ -324,7 +324,7 @@ class TreeChecker {
 
   // Checks the subtree whose root is walk.next_node, at `depth`, in the cell walk.lo / walk.hi, node by
   // node in storage order (depth first): a loop over the nodes with a stack of the inner nodes above
-  // the one visited, instead of a call a node (the calls took a third of the check's instructions).
+  // the one visited, instead of a call a node.
   void visit(Walk& walk, std::size_t depth) {
     const PointNode<T>* nodes = p_.nodes.data();
     const std::size_t node_count = p_.nodes.size();
@@ -454,7 +454,7 @@ class TreeChecker {
 
   const PointTreeParts<T>& p_;
   std::size_t n_, dim_;
-  bool kernels_;  // tree_check_kernels(), read once
+  [[maybe_unused]] bool kernels_;  // tree_check_kernels(), read once (unused without AVX2 dispatch)
 };
 
 /// Checks parts from outside (see the top of this file); throws Error("point tree: node 12: ...").
