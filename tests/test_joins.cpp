@@ -7,7 +7,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <numeric>
+#include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "kdspace/joins/joins.hpp"
@@ -318,6 +321,43 @@ TEST_CASE("joins: pairs of a few thousand points come in order, at and around ex
     check_pairs_in_order<float>(shape, false, seed++);
     check_pairs_in_order<double>(shape, false, seed++);
     check_pairs_in_order<double>(shape, true, seed++);
+  }
+}
+
+TEST_CASE("joins: runs of pairs are placed in order by rank, ties of distance and long runs included", "[joins][exact]") {
+  using kdspace::detail::FoundPair;
+  std::mt19937 rng(41);
+  for (std::size_t m = 0; m <= 40; ++m) {
+    for (int trial = 0; trial < 20; ++trial) {
+      // Distinct second indices (a point's pairs), distances drawn from few values so that many tie.
+      std::vector<std::uint32_t> b(200);
+      std::iota(b.begin(), b.end(), 0u);
+      std::shuffle(b.begin(), b.end(), rng);
+      std::vector<FoundPair<double>> run;
+      for (std::size_t j = 0; j < m; ++j) run.push_back({7, b[j], static_cast<double>(rng() % 4)});
+      const auto check = [&](auto less) {
+        std::vector<FoundPair<double>> want = run, got(m, FoundPair<double>{0, 0, 0.0});
+        std::sort(want.begin(), want.end(), less);
+        kdspace::detail::place_run(run.data(), m, got.data(), less);
+        for (std::size_t j = 0; j < m; ++j) {
+          CAPTURE(m, trial, j);
+          REQUIRE(got[j].b == want[j].b);
+          REQUIRE(got[j].dist == want[j].dist);
+        }
+      };
+      check(kdspace::detail::BySecondIndex{});
+      check(kdspace::detail::NearestFirst{});
+    }
+  }
+}
+
+TEST_CASE("joins: smaller_index picks the smaller of two indices", "[joins]") {
+  using kdspace::detail::smaller_index;
+  const std::uint32_t top = std::numeric_limits<std::uint32_t>::max();
+  for (const auto& [a, b] : std::vector<std::pair<std::uint32_t, std::uint32_t>>{
+           {0, 0}, {0, 1}, {1, 0}, {5, 5}, {top, 0}, {0, top}, {top - 1, top}, {top, top}, {123456, 654321}}) {
+    CAPTURE(a, b);
+    REQUIRE(smaller_index(a, b) == std::min(a, b));
   }
 }
 

