@@ -149,9 +149,11 @@ class KnnRule {
           }
           T kth = table_.kth(i);
           stats_.distances += rn.count();
-          distances_to_leaf<Isa>(reference_, r, rn.begin, a, space_, kth, [&](std::uint32_t j, T d) {
+          const auto offer = [&](std::uint32_t j, T d) {
             if (d <= kth && !(same_leaf && j == i) && table_.offer(i, d, reference_.index(j))) kth = table_.kth(i);
-          });
+          };
+          if (same_leaf) distances_within_leaf<Isa>(reference_, r, i, space_, kth, offer);
+          else distances_to_leaf<Isa>(reference_, r, rn.begin, a, space_, kth, offer);
         });
     T leaf_bound = 0;
     for (std::uint32_t i = qn.begin; i < qn.end; ++i) leaf_bound = std::max(leaf_bound, table_.kth(i));

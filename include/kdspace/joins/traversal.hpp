@@ -240,6 +240,16 @@ inline unsigned take_lowest_bit(unsigned& bits) {
   bits &= bits - 1;
   return j;
 }
+inline unsigned take_lowest_bit(std::uint64_t& bits) {
+#if defined(__GNUC__)
+  const unsigned j = static_cast<unsigned>(__builtin_ctzll(bits));
+#else
+  unsigned j = 0;
+  while (!(bits >> j & 1u)) ++j;
+#endif
+  bits &= bits - 1;
+  return j;
+}
 
 /// The distances from point `a` to the points [first, leaf.end) of reference leaf `id`, computed a
 /// block at a time from the leaf's columns (vector instructions): visit(distances, keep, base) for
@@ -261,11 +271,33 @@ void distance_blocks(const Tree& reference, std::uint32_t id, std::uint32_t firs
   }
 }
 
-/// distance_blocks, point by point: visit(position, distance) for the points at most `limit`
-/// (re-read before each block: a k-NN join lowers it as it goes), in order.
+/// distance_blocks, point by point: visit(position, distance) for the points at most `limit` (read
+/// for each block; a k-NN join lowers it as it goes, and checks again what it is offered), in order.
+///
+/// For a leaf of up to 64 points the blocks' masks go into one 64-bit mask and the points are
+/// visited after the last block: one loop over the points found, whose end is mispredicted once,
+/// rather than one per block with a point found (callgrind --branch-sim, 2e5 uniform 3-D points:
+/// pairs within r 563.1e6 -> 547.5e6 instructions, 3.57e6 -> 3.02e6 mispredicted branches; self-join
+/// k = 10 1346e6 -> 1352e6 instructions, 13.23e6 -> 12.49e6 mispredicted).
 template <class Isa, class Tree, class Space, class T, class Visit>
 void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
                        const T& limit, Visit&& visit) {
+  constexpr std::size_t most = 64;
+  const auto& leaf = reference.node(id);
+  if (leaf.count() <= most) {
+    std::array<T, most> all;
+    std::uint64_t near = 0;
+    distance_blocks(reference, id, first, a, space, [&](const auto& dist, unsigned keep, std::uint32_t base) {
+      const std::size_t at = base - leaf.begin;
+      near |= std::uint64_t{at_most(dist, limit, Isa{}) & keep} << at;
+      std::copy(dist.begin(), dist.end(), all.begin() + static_cast<std::ptrdiff_t>(at));
+    });
+    while (near) {
+      const unsigned j = take_lowest_bit(near);
+      visit(leaf.begin + j, all[j]);
+    }
+    return;
+  }
   distance_blocks(reference, id, first, a, space, [&](const auto& dist, unsigned keep, std::uint32_t base) {
     unsigned near = at_most(dist, limit, Isa{}) & keep;
     while (near) {
@@ -273,6 +305,33 @@ void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t fi
       visit(base + j, dist[j]);
     }
   });
+}
+
+/// distances_to_leaf from a point of the leaf itself, at position `pos`, to every point of the leaf:
+/// the point's own block of 8 first, then the others in the order of their numbers XOR its own (the
+/// neighbouring block next, then the other half of the leaf, and so on). Positions follow the tree,
+/// so blocks near in that order hold points near in space, and a k-NN row offered them first gets a
+/// small k-th sooner and takes fewer candidates that a nearer one evicts later.
+template <class Isa, class Tree, class Space, class T, class Visit>
+void distances_within_leaf(const Tree& tree, std::uint32_t id, std::uint32_t pos, const Space& space, const T& limit,
+                           Visit&& visit) {
+  constexpr std::size_t block = Tree::column_block;
+  const auto& leaf = tree.node(id);
+  const std::size_t stride = Tree::column_stride(leaf), blocks = stride / block, own = (pos - leaf.begin) / block;
+  std::size_t span = 1;
+  while (span < blocks) span *= 2;
+  const T* columns = tree.columns(id);
+  const T* a = tree.point(pos);
+  for (std::size_t t = 0; t < span; ++t) {
+    const std::size_t start = (own ^ t) * block;
+    if (start >= leaf.count()) continue;
+    const std::array<T, block> dist = space.template distances<block>(a, columns + start, stride, tree.dim());
+    unsigned near = at_most(dist, limit, Isa{}) & (~0u >> (32 - std::min<std::size_t>(leaf.count() - start, block)));
+    while (near) {
+      const unsigned j = take_lowest_bit(near);
+      visit(leaf.begin + static_cast<std::uint32_t>(start) + j, dist[j]);
+    }
+  }
 }
 
 /// The number of set bits of a block's mask of at most 8 bits (a table: the popcnt instruction is
