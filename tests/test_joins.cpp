@@ -324,7 +324,8 @@ TEST_CASE("joins: pairs of a few thousand points come in order, at and around ex
   }
 }
 
-TEST_CASE("joins: runs of pairs are placed in order by rank, ties of distance and long runs included", "[joins][exact]") {
+TEST_CASE("joins: runs of pairs are placed in order by rank, ties of distance and long runs included",
+          "[joins][exact]") {
   using kdspace::detail::FoundPair;
   std::mt19937 rng(41);
   for (std::size_t m = 0; m <= 40; ++m) {
@@ -354,8 +355,9 @@ TEST_CASE("joins: runs of pairs are placed in order by rank, ties of distance an
 TEST_CASE("joins: smaller_index picks the smaller of two indices", "[joins]") {
   using kdspace::detail::smaller_index;
   const std::uint32_t top = std::numeric_limits<std::uint32_t>::max();
-  for (const auto& [a, b] : std::vector<std::pair<std::uint32_t, std::uint32_t>>{
-           {0, 0}, {0, 1}, {1, 0}, {5, 5}, {top, 0}, {0, top}, {top - 1, top}, {top, top}, {123456, 654321}}) {
+  const std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs{
+      {0, 0}, {0, 1}, {1, 0}, {5, 5}, {top, 0}, {0, top}, {top - 1, top}, {top, top}, {123456, 654321}};
+  for (const auto& [a, b] : pairs) {
     CAPTURE(a, b);
     REQUIRE(smaller_index(a, b) == std::min(a, b));
   }

@@ -78,7 +78,7 @@ struct BySecondIndex {
 struct NearestFirst {
   template <class Found>
   bool operator()(const Found& x, const Found& y) const {
-    return (x.dist < y.dist) | ((x.dist == y.dist) & (x.b < y.b));  // without branches (sort_run)
+    return (x.dist < y.dist) | ((x.dist == y.dist) & (x.b < y.b));  // without branches (place_run)
   }
 };
 

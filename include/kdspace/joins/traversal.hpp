@@ -313,11 +313,12 @@ void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t fi
 /// so blocks near in that order hold points near in space, and a k-NN row offered them first gets a
 /// small k-th sooner and takes fewer candidates that a nearer one evicts later.
 template <class Isa, class Tree, class Space, class T, class Visit>
-void distances_within_leaf(const Tree& tree, std::uint32_t id, std::uint32_t pos, const Space& space, const T& limit,
-                           Visit&& visit) {
+void distances_within_leaf(const Tree& tree, std::uint32_t id, std::uint32_t pos, const Space& space,
+                           const T& limit, Visit&& visit) {
   constexpr std::size_t block = Tree::column_block;
   const auto& leaf = tree.node(id);
-  const std::size_t stride = Tree::column_stride(leaf), blocks = stride / block, own = (pos - leaf.begin) / block;
+  const std::size_t stride = Tree::column_stride(leaf), blocks = stride / block;
+  const std::size_t own = (pos - leaf.begin) / block;
   std::size_t span = 1;
   while (span < blocks) span *= 2;
   const T* columns = tree.columns(id);
@@ -326,7 +327,8 @@ void distances_within_leaf(const Tree& tree, std::uint32_t id, std::uint32_t pos
     const std::size_t start = (own ^ t) * block;
     if (start >= leaf.count()) continue;
     const std::array<T, block> dist = space.template distances<block>(a, columns + start, stride, tree.dim());
-    unsigned near = at_most(dist, limit, Isa{}) & (~0u >> (32 - std::min<std::size_t>(leaf.count() - start, block)));
+    const std::size_t in_leaf = std::min<std::size_t>(leaf.count() - start, block);
+    unsigned near = at_most(dist, limit, Isa{}) & (~0u >> (32 - in_leaf));
     while (near) {
       const unsigned j = take_lowest_bit(near);
       visit(leaf.begin + static_cast<std::uint32_t>(start) + j, dist[j]);
