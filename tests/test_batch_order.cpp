@@ -94,8 +94,8 @@ TEST_CASE("morton_order takes rows at the ends of the float range, a flat box an
 TEST_CASE(
     "exact: knn_batch answered in Z-order matches brute force bit for bit on every shape, 1-9 dimensions",
     "[points][exact][batch_order]") {
-  // 300 queries: batches from 256 queries on are reordered (up to 8-D in Z-order, beyond by leaf for
-  // large trees); a third of the queries are base points (ties), every seventh far outside.
+  // 300 queries: batches from 256 queries on are reordered (up to 8-D in Z-order, beyond by leaf); a
+  // third of the queries are base points (ties), every seventh far outside.
   const std::size_t dim = GENERATE(as<std::size_t>{}, 1, 2, 3, 4, 5, 8, 9);
   const Shape shape = GENERATE(Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid,
                                Shape::identical, Shape::flat, Shape::sorted_x);

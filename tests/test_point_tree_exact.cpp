@@ -1090,15 +1090,16 @@ TEST_CASE("exact: knn_batch and radius_batch on 1, 2 and 4 threads give the sing
   bad.done();
 }
 
-TEST_CASE("exact: knn_batch on a tree larger than the caches, its queries reordered by leaf, gives the single-query answers",
+TEST_CASE("exact: knn_batch beyond 8-D, its queries reordered by leaf, gives the single-query answers",
           "[points][exact][threads]") {
-  // Beyond 8-D (where batches are not put in Z-order) a batch visits its queries in leaf order only
-  // when the tree outgrows the caches (8 MiB): this tree of 240k 9-D points is the one here that does.
-  const Case c{Shape::clustered, 240000, 9, 14700};
+  // Beyond 8-D (where batches are not put in Z-order) a batch of 256 queries or more visits them in
+  // the order of the leaves their descents reach, whatever the tree's size.
+  const Shape shape = GENERATE(Shape::uniform, Shape::clustered, Shape::duplicates, Shape::flat);
+  const std::size_t dim = GENERATE(as<std::size_t>{}, 9, 13, 20);
+  const Case c{shape, 3000, dim, 14700 + static_cast<std::uint32_t>(dim)};
   const auto pts = make_points<float>(c.shape, c.n, c.dim, c.seed);
   const auto queries = make_queries<float>(c.shape, pts, c.n, c.dim, 300, c.seed + 1);
   const PointTree<float> tree(pts.data(), c.n, c.dim);
-  REQUIRE(tree.memory_bytes() > (std::size_t{8} << 20));
   Mismatches bad;
   for (std::size_t k : {1, 10})
     batch_knn_matches_single(tree, queries, k, SearchParams{}, describe<float, kdspace::L2>(c), bad);

@@ -591,14 +591,17 @@ class PointTree {
   // given order on building (90k points) and armadillo (23k), 10-NN 1.0-1.2x; none on kitten (4.7k
   // points, 521 queries), whose repeated batch the branch predictor learns. On uniform 3-D points
   // (a tenth held out) 1.5-1.7x for 1-NN and 1.3-1.4x for 10-NN at 2e5 points over the given order,
-  // 1.5x and 1.24x at 1e6 over the leaf order that follows. Beyond 8-D the key is the leaf each
-  // query's descent reaches, which pays only where the tree outgrows the caches (locality_bytes;
-  // measured in 3-D before the Z-order: 1.75x for 10-NN on 1e6 uniform points), as the sort costs a
-  // descent per query. Small batches keep their order.
+  // 1.5x and 1.24x at 1e6 over the leaf order that follows.
+  // Beyond 8-D the key is the leaf each query's descent reaches. It costs a descent per query, a
+  // small part of a query that scores hundreds of points in dozens of leaves, and it pays whatever
+  // the tree's size: on 13-D MFCC frames (synthetic audio, queries shuffled, one thread, busy
+  // machine) 1-NN batches 1.34x, 1.33x, 1.31x and 1.31x the queries a second of the shuffled order
+  // at 5k, 20k, 50k and 100k points (trees of 0.3 to 6 MB, so not the caches: the branches), 10-NN
+  // 1.26-1.30x. (It used to wait for trees of 8 MB, a threshold measured on 3-D points before the
+  // Z-order, which left 100k points of 13-D or 16-D in the given order.) Small batches keep their order.
   std::vector<std::size_t> visit_order(const T* queries, std::size_t first, std::size_t last) const {
     std::vector<std::size_t> visit(last - first);
-    if (last - first < locality_batch || last > UINT32_MAX ||
-        (dim() > detail::morton_max_dim && memory_bytes() < locality_bytes)) {
+    if (last - first < locality_batch || last > UINT32_MAX) {
       for (std::size_t i = 0; i < visit.size(); ++i) visit[i] = first + i;
       return visit;
     }
@@ -620,10 +623,6 @@ class PointTree {
     return visit;
   }
   static constexpr std::size_t locality_batch = 256;  // batches from this size on are reordered
-  // ... if the tree (points, indices, nodes) is at least this large: about where reordering starts
-  // to pay on uniform 3-D points (1-NN batches of held-out queries, one thread: 9% slower with it at
-  // 200k points, 3.6 MB; even at 500k, 9 MB; 1.2x faster at 1M), on a 1 MiB L2, 32 MiB L3 machine.
-  static constexpr std::size_t locality_bytes = std::size_t{8} << 20;
 
   // Queries of a batch the tree answers before BatchMethod::automatic chooses.
   static constexpr std::size_t probe_queries = 16;
