@@ -608,6 +608,25 @@ TEST_CASE(
   bad.done();
 }
 
+TEST_CASE(
+    "exact: knn matches brute force bit for bit in each dimension from 9 to 24, whose leaves are scanned "
+    "with the dimension known",
+    "[points][exact]") {
+  // PointTree<T> (run-time dimension, L2) scans its leaves with a compile-time dimension from 2 to 24
+  // (PointTree::scan_leaf); the sweeps above reach 16 of these only. Every one of 9..24 here, with
+  // ties (duplicates, grid), all-identical leaves and the first leaf's fill, in float and double.
+  const std::size_t dim = GENERATE(range<std::size_t>(9, 25));
+  const Shape shape = GENERATE(Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid, Shape::identical);
+  BuildParams small_leaves;
+  small_leaves.leaf_size = 8;
+  const std::vector<BuildParams> configs = {BuildParams{}, small_leaves};
+  const auto seed = 7200 + static_cast<std::uint32_t>(dim * 8 + static_cast<std::size_t>(shape));
+  Mismatches bad;
+  knn_matches_brute_force<float, kdspace::L2>({shape, 600, dim, seed}, configs, 12, bad);
+  knn_matches_brute_force<double, kdspace::L2>({shape, 300, dim, seed + 1}, configs, 6, bad);
+  bad.done();
+}
+
 TEST_CASE("exact: a tree of a single point answers knn with that point, with every split rule",
           "[points][exact]") {
   const std::size_t dim = GENERATE(as<std::size_t>{}, 1, 2, 3, 4, 8, 16, 32, 64, 128);
