@@ -616,7 +616,8 @@ TEST_CASE(
   // (PointTree::scan_leaf); the sweeps above reach 16 of these only. Every one of 9..24 here, with
   // ties (duplicates, grid), all-identical leaves and the first leaf's fill, in float and double.
   const std::size_t dim = GENERATE(range<std::size_t>(9, 25));
-  const Shape shape = GENERATE(Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid, Shape::identical);
+  const Shape shape =
+      GENERATE(Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid, Shape::identical);
   BuildParams small_leaves;
   small_leaves.leaf_size = 8;
   const std::vector<BuildParams> configs = {BuildParams{}, small_leaves};
