@@ -609,12 +609,11 @@ TEST_CASE(
 }
 
 TEST_CASE(
-    "exact: knn matches brute force bit for bit in each dimension from 9 to 24, whose leaves are scanned "
-    "with the dimension known",
+    "exact: knn matches brute force bit for bit in each dimension from 9 to 24, the descriptors' sizes",
     "[points][exact]") {
-  // PointTree<T> (run-time dimension, L2) scans its leaves with a compile-time dimension from 2 to 24
-  // (PointTree::scan_leaf); the sweeps above reach 16 of these only. Every one of 9..24 here, with
-  // ties (duplicates, grid), all-identical leaves and the first leaf's fill, in float and double.
+  // Descriptor data live here (MFCC 13 and 20, 16-bin histograms): every dimension, so every count of
+  // axes after the distance's last block of 8, where the sweeps above reach only 16. With ties
+  // (duplicates, grid), all-identical leaves and the first leaf's fill, in float and double.
   const std::size_t dim = GENERATE(range<std::size_t>(9, 25));
   const Shape shape =
       GENERATE(Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid, Shape::identical);

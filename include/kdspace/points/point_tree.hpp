@@ -459,15 +459,10 @@ class PointTree {
     ctx.axis_terms[axis] = old_term;
   }
 
-  // Under L2 a run-time dimension from 2 to 24 scans its leaves with the dimension as a constant, so
+  // Under L2 a run-time dimension from 2 to 8 scans its leaves with the dimension as a constant, so
   // that the distance loop unrolls as in a compile-time tree: a switch per leaf, which the branch
   // predictor learns at once. A PointTree<float> of 2..8-D points then answers as fast as
-  // PointTree<float, D> (within 5%, where it was 8-18% slower); on 13-D and 20-D MFCC frames
-  // (batches sorted by leaf, one thread, busy machine, best of 5, 3 alternations) 1-NN batches ran
-  // 1.05-1.06x and 1.01-1.05x faster than with the run-time dimension, 10-NN 1.04-1.06x and
-  // 1.02-1.07x. 24 covers the common descriptor sizes (MFCC 13 and 20, 16-bin histograms); beyond
-  // it the 8-lane loop dominates. (A chain of tests in place of the switch measured no faster than
-  // the run-time dimension at 13-D.) L1 and Linf keep their code small.
+  // PointTree<float, D> (within 5%, where it was 8-18% slower); L1 and Linf keep their code small.
   template <class Results>
   void scan_leaf(const Node& leaf, Context& ctx, Results& results) const {
     if constexpr (Dim == Dynamic && std::is_same_v<Metric, L2>) {
@@ -479,22 +474,6 @@ class PointTree {
         case 6: return scan_leaf_as<6>(leaf, ctx, results);
         case 7: return scan_leaf_as<7>(leaf, ctx, results);
         case 8: return scan_leaf_as<8>(leaf, ctx, results);
-        case 9: return scan_leaf_as<9>(leaf, ctx, results);
-        case 10: return scan_leaf_as<10>(leaf, ctx, results);
-        case 11: return scan_leaf_as<11>(leaf, ctx, results);
-        case 12: return scan_leaf_as<12>(leaf, ctx, results);
-        case 13: return scan_leaf_as<13>(leaf, ctx, results);
-        case 14: return scan_leaf_as<14>(leaf, ctx, results);
-        case 15: return scan_leaf_as<15>(leaf, ctx, results);
-        case 16: return scan_leaf_as<16>(leaf, ctx, results);
-        case 17: return scan_leaf_as<17>(leaf, ctx, results);
-        case 18: return scan_leaf_as<18>(leaf, ctx, results);
-        case 19: return scan_leaf_as<19>(leaf, ctx, results);
-        case 20: return scan_leaf_as<20>(leaf, ctx, results);
-        case 21: return scan_leaf_as<21>(leaf, ctx, results);
-        case 22: return scan_leaf_as<22>(leaf, ctx, results);
-        case 23: return scan_leaf_as<23>(leaf, ctx, results);
-        case 24: return scan_leaf_as<24>(leaf, ctx, results);
         default: break;
       }
     }
@@ -619,8 +598,7 @@ class PointTree {
   // machine) 1-NN batches 1.34x, 1.33x, 1.31x and 1.31x the queries a second of the shuffled order
   // at 5k, 20k, 50k and 100k points (trees of 0.3 to 6 MB, so not the caches: the branches), 10-NN
   // 1.26-1.30x. (It used to wait for trees of 8 MB, a threshold measured on 3-D points before the
-  // Z-order, which left 100k points of 13-D or 16-D in the given order.) Small batches keep their
-  // order.
+  // Z-order, which left 100k points of 13-D or 16-D in the given order.) Small batches keep their order.
   std::vector<std::size_t> visit_order(const T* queries, std::size_t first, std::size_t last) const {
     std::vector<std::size_t> visit(last - first);
     if (last - first < locality_batch || last > UINT32_MAX) {
