@@ -229,20 +229,16 @@ __attribute__((target("avx2"))) unsigned not_above_each(const std::array<T, N>& 
 }
 #endif
 
-/// The lowest set bit's position, and that bit cleared.
-inline unsigned take_lowest_bit(unsigned& bits) {
+/// The lowest set bit's position, and that bit cleared (`bits` unsigned or std::uint64_t, not 0).
+template <class Bits>
+unsigned take_lowest_bit(Bits& bits) {
+  static_assert(std::is_same_v<Bits, unsigned> || std::is_same_v<Bits, std::uint64_t>);
 #if defined(__GNUC__)
-  const unsigned j = static_cast<unsigned>(__builtin_ctz(bits));
-#else
-  unsigned j = 0;
-  while (!(bits >> j & 1u)) ++j;
-#endif
-  bits &= bits - 1;
-  return j;
-}
-inline unsigned take_lowest_bit(std::uint64_t& bits) {
-#if defined(__GNUC__)
-  const unsigned j = static_cast<unsigned>(__builtin_ctzll(bits));
+  unsigned j;
+  if constexpr (std::is_same_v<Bits, unsigned>)
+    j = static_cast<unsigned>(__builtin_ctz(bits));
+  else
+    j = static_cast<unsigned>(__builtin_ctzll(bits));
 #else
   unsigned j = 0;
   while (!(bits >> j & 1u)) ++j;
