@@ -423,13 +423,9 @@ class TreeChecker {
 #endif
       if (count >= 4) {
         // The cell's four loaded coordinates (x y z, then the padding) into the three lane orders.
-        const __m128 cell_lo = _mm_loadu_ps(lo), cell_hi = _mm_loadu_ps(hi);
-        const __m128 lo0 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(0, 2, 1, 0)),
-                     hi0 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(0, 2, 1, 0));
-        const __m128 lo1 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(1, 0, 2, 1)),
-                     hi1 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(1, 0, 2, 1));
-        const __m128 lo2 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(2, 1, 0, 2)),
-                     hi2 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(2, 1, 0, 2));
+        const CellLanes3 cell_lo = cell_lanes3(lo), cell_hi = cell_lanes3(hi);
+        const __m128 lo0 = cell_lo.order[0], lo1 = cell_lo.order[1], lo2 = cell_lo.order[2];
+        const __m128 hi0 = cell_hi.order[0], hi1 = cell_hi.order[1], hi2 = cell_hi.order[2];
         const auto within = [](__m128 low, __m128 p, __m128 high) {
           return _mm_and_ps(_mm_cmple_ps(low, p), _mm_cmple_ps(p, high));
         };

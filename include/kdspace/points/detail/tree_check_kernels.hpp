@@ -10,11 +10,28 @@
 
 #include "kdspace/detail/avx2_dispatch.hpp"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 #if defined(KDSPACE_AVX2_DISPATCH)
 #include <immintrin.h>
 #endif
 
 namespace kdspace::detail {
+
+#if defined(__SSE2__)
+/// A 3-D cell's bounds (four floats: x y z, then any) in the three lane orders of 3-D points read
+/// four floats at a time: x y z x, y z x y, z x y z.
+struct CellLanes3 {
+  __m128 order[3];
+};
+inline CellLanes3 cell_lanes3(const float* bounds) {
+  const __m128 cell = _mm_loadu_ps(bounds);
+  return {{_mm_shuffle_ps(cell, cell, _MM_SHUFFLE(0, 2, 1, 0)),
+           _mm_shuffle_ps(cell, cell, _MM_SHUFFLE(1, 0, 2, 1)),
+           _mm_shuffle_ps(cell, cell, _MM_SHUFFLE(2, 1, 0, 2))}};
+}
+#endif
 
 /// Whether the kernels below may run: avx2_dispatch() and a processor with BMI2 (every AVX2
 /// processor has it; both read once per process).
@@ -40,14 +57,10 @@ __attribute__((target("avx2"), always_inline)) inline __m256 within8(__m256 low,
 /// ends with the eight points that end it (r of them checked a second time). A NaN fails.
 __attribute__((target("avx2"))) inline bool points3_inside_avx2(const float* rows, std::size_t count,
                                                                 const float* lo, const float* hi) {
-  const __m128 cell_lo = _mm_loadu_ps(lo), cell_hi = _mm_loadu_ps(hi);
-  // The three lane orders of four lanes (x y z x, y z x y, z x y z), paired into eight.
-  const __m128 l0 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(0, 2, 1, 0)),
-               l1 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(1, 0, 2, 1)),
-               l2 = _mm_shuffle_ps(cell_lo, cell_lo, _MM_SHUFFLE(2, 1, 0, 2));
-  const __m128 h0 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(0, 2, 1, 0)),
-               h1 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(1, 0, 2, 1)),
-               h2 = _mm_shuffle_ps(cell_hi, cell_hi, _MM_SHUFFLE(2, 1, 0, 2));
+  // The three lane orders of four lanes, paired into eight.
+  const CellLanes3 low = cell_lanes3(lo), high = cell_lanes3(hi);
+  const __m128 l0 = low.order[0], l1 = low.order[1], l2 = low.order[2];
+  const __m128 h0 = high.order[0], h1 = high.order[1], h2 = high.order[2];
   const __m256 lo0 = _mm256_set_m128(l1, l0), lo1 = _mm256_set_m128(l0, l2), lo2 = _mm256_set_m128(l2, l1);
   const __m256 hi0 = _mm256_set_m128(h1, h0), hi1 = _mm256_set_m128(h0, h2), hi2 = _mm256_set_m128(h2, h1);
   __m256 ok = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
