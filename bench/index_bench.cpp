@@ -24,10 +24,11 @@
 //     DynamicPointTree's answers must equal the fresh tree's bit for bit (ids mapped), nanoflann's
 //     distances must agree within 1e-5 relative; else the exit status is 1.
 //
-// usage: kdspace-index-bench [--quick] [--reps R] [--dir DIR] [--only load|updates]
+// usage: kdspace-index-bench [--quick] [--reps R] [--dir DIR] [--only load|updates|process]
 //   --quick   sizes / 10 (for development)
 //   --reps R  repetitions of the timed loads and queries, interleaved, median reported (default 5)
 //   --dir D   where the index files go (default: the temporary folder)
+//   --only process   only the point tree's build and load as a process pays them (the last table of 1.)
 // Output: markdown tables, then one JSON line per measurement ({"bench":"index",...}).
 #include <fcntl.h>
 #include <hnswlib/hnswlib.h>
@@ -47,6 +48,7 @@
 #include <nanoflann.hpp>
 #include <numeric>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -229,40 +231,114 @@ LoadRow load_against_build(const std::string& what, std::size_t n, const std::st
   return row;
 }
 
-// The point tree's build and mapped load on one thread and on two, like with like: the build's
-// BuildParams::threads (1 by default) against load_point_tree(path, map, threads); builds and loads
-// interleaved, median of `reps` each.
+// The point tree's build and mapped load as a user's process pays them. A process that builds a tree
+// once gets its memory from the kernel page by page (glibc serves these large blocks by mmap, or from a
+// heap it trims when they are freed), so its build pays about 9,000 minor page faults; a build repeated
+// in one process can reuse pages malloc kept from the last one and pays none. So each figure here
+// comes from a fresh process (this program run again with --child), and the repeated in-process
+// figures are printed beside them; build and load each on one thread and on two (BuildParams::threads
+// against load_point_tree(path, map, threads)), all interleaved, median of `reps` each.
+struct Timed {
+  double seconds = 0;
+  double faults = 0;
+};
+
+Timed timed(const std::function<void()>& work) {
+  const long faults_before = minor_faults();
+  const Clock::time_point start = Clock::now();
+  work();
+  return {seconds_since(start), static_cast<double>(minor_faults() - faults_before)};
+}
+
+// In the child: one build (path empty) or one mapped load of `path`, on `threads`; prints its Timed.
+int child_run(bool build, unsigned threads, std::size_t n, const std::string& path) {
+  using Tree = kdspace::PointTree<float>;
+  const auto base = build ? uniform_points(n, 3, 1) : std::vector<float>();
+  const Timed t = timed([&] {
+    if (build) {
+      kdspace::BuildParams params;
+      params.threads = threads;
+      const Tree tree(base.data(), n, 3, params);
+    } else {
+      const Tree loaded = kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, threads);
+    }
+  });
+  std::printf("%.9g %.0f\n", t.seconds, t.faults);
+  return 0;
+}
+
+std::string self_path() {
+  std::vector<char> buf(4096);
+  const ssize_t len = ::readlink("/proc/self/exe", buf.data(), buf.size() - 1);
+  if (len <= 0) throw std::runtime_error("cannot read /proc/self/exe");
+  return std::string(buf.data(), static_cast<std::size_t>(len));
+}
+
+// Runs this program with --child and returns what it measured.
+Timed in_fresh_process(bool build, unsigned threads, std::size_t n, const std::string& path) {
+  const std::string command = "'" + self_path() + "' --child " + (build ? "build " : "load ") +
+                              std::to_string(threads) + " " + std::to_string(n) + " '" + path + "'";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  Timed t;
+  const bool ok = pipe && std::fscanf(pipe, "%lf %lf", &t.seconds, &t.faults) == 2;
+  if (!pipe || ::pclose(pipe) != 0 || !ok) throw std::runtime_error("the child run failed: " + command);
+  return t;
+}
+
 void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
   const auto base = uniform_points(n, 3, 1);
   const std::string path = dir + "/bench-tree-threads.kdx";
   using Tree = kdspace::PointTree<float>;
-  std::vector<double> build_s[2], load_s[2];
+  kdspace::io::save(path, Tree(base.data(), n, 3));
+  // [threads - 1]: fresh-process and repeated in-process builds and loads
+  std::vector<Timed> fresh_build[2], fresh_load[2], again_build[2], again_load[2];
   for (int r = 0; r < reps; ++r) {
     for (unsigned threads : {1u, 2u}) {
+      fresh_build[threads - 1].push_back(in_fresh_process(true, threads, n, path));
+      fresh_load[threads - 1].push_back(in_fresh_process(false, threads, n, path));
       kdspace::BuildParams params;
       params.threads = threads;
-      const Clock::time_point start = Clock::now();
-      const Tree tree(base.data(), n, 3, params);
-      build_s[threads - 1].push_back(seconds_since(start));
-      if (r == 0 && threads == 1) kdspace::io::save(path, tree);
-    }
-    for (unsigned threads : {1u, 2u}) {
-      const Clock::time_point start = Clock::now();
-      const Tree loaded = kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, threads);
-      load_s[threads - 1].push_back(seconds_since(start));
+      again_build[threads - 1].push_back(timed([&] { const Tree tree(base.data(), n, 3, params); }));
+      again_load[threads - 1].push_back(timed([&] {
+        const Tree loaded = kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, threads);
+      }));
     }
   }
   std::filesystem::remove(path);
+  const auto seconds = [](const std::vector<Timed>& v) {
+    std::vector<double> s;
+    for (const Timed& t : v) s.push_back(t.seconds);
+    return median(s);
+  };
+  const auto faults = [](const std::vector<Timed>& v) {
+    std::vector<double> f;
+    for (const Timed& t : v) f.push_back(t.faults);
+    return median(f);
+  };
   std::printf(
-      "\n### PointTree, %zu uniform 3-D float points: build and mapped load on one thread and on two "
+      "\n### PointTree, %zu uniform 3-D float points: build and mapped load as a process pays them "
       "(median of %d each, interleaved)\n\n"
-      "| threads | build s | load, mapped ms | load ÷ build |\n|---:|---:|---:|---:|\n",
+      "Fresh: each build or load the first in a new process (what `kdspace index` or a program that builds\n"
+      "once pays, page faults of its new memory included); again: repeated in this process, where malloc\n"
+      "hands the build pages it already touched. The ratios use the fresh figures; \"÷ 1-thread build\"\n"
+      "sets the load against the default build (BuildParams::threads = 1).\n\n"
+      "| threads | build, fresh s | faults | build, again s | faults | load, fresh ms | faults | load, again ms "
+      "| load ÷ build (same threads) | load ÷ 1-thread build |\n"
+      "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
       n, reps);
   for (unsigned t : {1u, 2u}) {
-    const double build = median(build_s[t - 1]), load = median(load_s[t - 1]);
-    std::printf("| %u | %.4f | %.3f | %.2f%% |\n", t, build, 1e3 * load, 100 * load / build);
+    const std::size_t i = t - 1;
+    const double build = seconds(fresh_build[i]), load = seconds(fresh_load[i]);
+    std::printf("| %u | %.4f | %.0f | %.4f | %.0f | %.3f | %.0f | %.3f | %.2f%% | %.2f%% |\n", t, build,
+                faults(fresh_build[i]), seconds(again_build[i]), faults(again_build[i]), 1e3 * load,
+                faults(fresh_load[i]), 1e3 * seconds(again_load[i]), 100 * load / build,
+                100 * load / seconds(fresh_build[0]));
     json("\"part\": \"load_threads\", \"index\": \"PointTree, uniform 3-D float\", \"threads\": " +
-         std::to_string(t) + ", \"build_s\": " + num(build) + ", \"load_map_s\": " + num(load));
+         std::to_string(t) + ", \"build_fresh_s\": " + num(build) + ", \"build_fresh_faults\": " +
+         num(faults(fresh_build[i])) + ", \"build_again_s\": " + num(seconds(again_build[i])) +
+         ", \"build_again_faults\": " + num(faults(again_build[i])) + ", \"load_map_fresh_s\": " + num(load) +
+         ", \"load_map_fresh_faults\": " + num(faults(fresh_load[i])) +
+         ", \"load_map_again_s\": " + num(seconds(again_load[i])));
   }
 }
 
@@ -634,6 +710,14 @@ void part_updates(std::size_t scale, int reps) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc == 6 && std::string(argv[1]) == "--child")
+    try {
+      return child_run(std::string(argv[2]) == "build", static_cast<unsigned>(std::atoi(argv[3])),
+                       static_cast<std::size_t>(std::atoll(argv[4])), argv[5]);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "kdspace-index-bench --child: %s\n", e.what());
+      return 1;
+    }
   std::size_t scale = 1;
   int reps = 5;
   std::string dir = std::filesystem::temp_directory_path().string(), only;
@@ -649,13 +733,14 @@ int main(int argc, char** argv) {
       only = argv[++i];
     else {
       std::fprintf(stderr,
-                   "usage: kdspace-index-bench [--quick] [--reps R] [--dir DIR] [--only load|updates]\n");
+                   "usage: kdspace-index-bench [--quick] [--reps R] [--dir DIR] [--only load|updates|process]\n");
       return 2;
     }
   }
   try {
     if (only.empty() || only == "load") part_load(scale, reps, dir);
     if (only.empty() || only == "updates") part_updates(scale, reps);
+    if (only == "process") point_tree_threads(1000000 / scale, reps, dir);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "kdspace-index-bench: %s\n", e.what());
     return 1;
