@@ -8,7 +8,7 @@
 //     cache (warm), as an index kept on a server is. Then where a mapped load's time goes, each part
 //     alone (min of the repetitions): opening and mapping, every checksum (one thread), the
 //     structural checks of the kind's loader (two threads for a large point tree or box tree, one
-//     for a forest), and reading the mapped bytes once (one thread: the floor), with the minor page
+//     for a forest), and reading the mapped bytes once (the floor; on one thread and on two), with the minor page
 //     faults of a mapped load and the cost of starting a thread. The builds above run on one thread
 //     (BuildParams::threads, 1 by default), the large point tree's and box tree's loads on two; so
 //     last, the point tree's build and mapped load each on one thread and on two, like with like.
@@ -116,7 +116,7 @@ struct LoadRow {
   std::string what;
   std::size_t n = 0;
   double build_s = 0, save_s = 0, file_mb = 0, map_s = 0, read_s = 0;
-  double open_s = 0, checksums_s = 0, structure_s = 0, touch_s = 0;  // the parts, alone, min
+  double open_s = 0, checksums_s = 0, structure_s = 0, touch_s = 0, touch2_s = 0;  // the parts, alone, min
   double faults = 0;  // minor page faults of a whole mapped load (mean)
   bool same = false;
 };
@@ -144,19 +144,29 @@ double thread_start_s(int reps) {
   return minimum(s);
 }
 
-// Seconds to map `path` and sum every 8-byte word of it: a mapped load's floor (it reads each byte).
-double read_mapped(const std::string& path) {
+// Seconds to map `path` and sum every 8-byte word of it: a mapped load's floor (it reads each byte). On
+// two threads each sums half the words (the floor of a two-thread load, thread start included).
+double read_mapped(const std::string& path, unsigned threads) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   const auto size = static_cast<std::size_t>(std::filesystem::file_size(path));
   const Clock::time_point start = Clock::now();
   void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
-  std::uint64_t sum = 0;
+  std::uint64_t sums[2] = {0, 0};
   if (map != MAP_FAILED) {
     const auto* words = static_cast<const std::uint64_t*>(map);
-    for (std::size_t i = 0; i < size / 8; ++i) sum += words[i];
+    const std::size_t count = size / 8, half = threads > 1 ? count / 2 : count;
+    const auto sum = [words](std::size_t begin, std::size_t end, std::uint64_t& out) {
+      std::uint64_t total = 0;
+      for (std::size_t i = begin; i < end; ++i) total += words[i];
+      out = total;
+    };
+    if (threads > 1)
+      kdspace::detail::fork_join([&] { sum(half, count, sums[1]); }, [&] { sum(0, half, sums[0]); });
+    else
+      sum(0, count, sums[0]);
   }
   const double s = seconds_since(start);
-  if (sum == 1) std::fprintf(stderr, "index-bench: %s sums to 1\n", path.c_str());  // the read must stay
+  if (sums[0] + sums[1] == 1) std::fprintf(stderr, "index-bench: %s sums to 1\n", path.c_str());  // keep the read
   if (map != MAP_FAILED) ::munmap(map, size);
   ::close(fd);
   if (map == MAP_FAILED) std::fprintf(stderr, "index-bench: could not map %s\n", path.c_str());
@@ -167,7 +177,7 @@ double read_mapped(const std::string& path) {
 // checksums, load_file(file) (the structural checks), and a read of every mapped byte.
 template <class LoadFile>
 void time_parts(LoadRow& row, const std::string& path, int reps, LoadFile load_file) {
-  std::vector<double> open_s, checksums_s, structure_s, touch_s;
+  std::vector<double> open_s, checksums_s, structure_s, touch_s, touch2_s;
   for (int r = 0; r < reps; ++r) {
     Clock::time_point start = Clock::now();
     const auto file =
@@ -179,12 +189,14 @@ void time_parts(LoadRow& row, const std::string& path, int reps, LoadFile load_f
     start = Clock::now();
     const auto loaded = load_file(file);
     structure_s.push_back(seconds_since(start));
-    touch_s.push_back(read_mapped(path));
+    touch_s.push_back(read_mapped(path, 1));
+    touch2_s.push_back(read_mapped(path, 2));
   }
   row.open_s = minimum(open_s);
   row.checksums_s = minimum(checksums_s);
   row.structure_s = minimum(structure_s);
   row.touch_s = minimum(touch_s);
+  row.touch2_s = minimum(touch2_s);
 }
 
 // Times build() once, save(path) once, then `reps` interleaved loads of each mode; same(loaded)
@@ -227,6 +239,7 @@ LoadRow load_against_build(const std::string& what, std::size_t n, const std::st
        ", \"load_map_s\": " + num(row.map_s) + ", \"load_read_s\": " + num(row.read_s) +
        ", \"open_s\": " + num(row.open_s) + ", \"checksums_s\": " + num(row.checksums_s) +
        ", \"structure_s\": " + num(row.structure_s) + ", \"read_mapped_s\": " + num(row.touch_s) +
+       ", \"read_mapped_2_threads_s\": " + num(row.touch2_s) +
        ", \"faults\": " + num(row.faults) + ", \"same_answers\": " + (row.same ? "true" : "false"));
   return row;
 }
@@ -422,11 +435,12 @@ void part_load(std::size_t scale, int reps, const std::string& dir) {
   const double thread_ms = 1e3 * thread_start_s(reps);
   std::printf(
       "| index | open and map ms | page faults a load | checksums ms | structural checks ms | "
-      "thread start ms | read every mapped byte ms (floor) |\n"
-      "|---|---:|---:|---:|---:|---:|---:|\n");
+      "thread start ms | read every mapped byte ms (floor) | the same on two threads ms |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const LoadRow& r : rows)
-    std::printf("| %s | %.3f | %.0f | %.3f | %.3f | %.3f | %.3f |\n", r.what.c_str(), 1e3 * r.open_s,
-                r.faults, 1e3 * r.checksums_s, 1e3 * r.structure_s, thread_ms, 1e3 * r.touch_s);
+    std::printf("| %s | %.3f | %.0f | %.3f | %.3f | %.3f | %.3f | %.3f |\n", r.what.c_str(), 1e3 * r.open_s,
+                r.faults, 1e3 * r.checksums_s, 1e3 * r.structure_s, thread_ms, 1e3 * r.touch_s,
+                1e3 * r.touch2_s);
   json("\"part\": \"load\", \"thread_start_s\": " + num(thread_ms / 1e3));
   point_tree_threads(n, reps, dir);
 }
