@@ -8,10 +8,13 @@
 //     cache (warm), as an index kept on a server is. Then where a mapped load's time goes, each part
 //     alone (min of the repetitions): opening and mapping, every checksum (one thread), the
 //     structural checks of the kind's loader (two threads for a large point tree or box tree, one
-//     for a forest), and reading the mapped bytes once (the floor; on one thread and on two), with the minor page
-//     faults of a mapped load and the cost of starting a thread. The builds above run on one thread
-//     (BuildParams::threads, 1 by default), the large point tree's and box tree's loads on two; so
-//     last, the point tree's build and mapped load each on one thread and on two, like with like.
+//     for a forest), and reading the mapped bytes once (the floor, on one thread and on two), with
+//     the minor page faults of a mapped load and the cost of starting a thread. The builds above run
+//     on one thread (BuildParams::threads, 1 by default), each the first of its kind in this process,
+//     the large point tree's and box tree's loads on two; so last, the point tree's build and mapped
+//     load each on one thread and on two, like with like, each in a fresh process (as a program that
+//     builds or loads once pays them, page faults of its new memory included), with the same repeated
+//     in this process beside them.
 //  2. Updates. 1e6 uniform 3-D points, then churn: 500,000 random points removed one at a time and
 //     500,000 new ones inserted, half one at a time and half in batches of 1,000, interleaved across
 //     libraries in rounds of 50,000 operations: kdspace's DynamicPointTree, nanoflann's
@@ -166,7 +169,8 @@ double read_mapped(const std::string& path, unsigned threads) {
       sum(0, count, sums[0]);
   }
   const double s = seconds_since(start);
-  if (sums[0] + sums[1] == 1) std::fprintf(stderr, "index-bench: %s sums to 1\n", path.c_str());  // keep the read
+  if (sums[0] + sums[1] == 1)
+    std::fprintf(stderr, "index-bench: %s sums to 1\n", path.c_str());  // keep the read
   if (map != MAP_FAILED) ::munmap(map, size);
   ::close(fd);
   if (map == MAP_FAILED) std::fprintf(stderr, "index-bench: could not map %s\n", path.c_str());
@@ -234,12 +238,12 @@ LoadRow load_against_build(const std::string& what, std::size_t n, const std::st
   time_parts(row, path, reps, load_file);
   all_agree = all_agree && row.same;
   std::filesystem::remove(path);
-  json("\"part\": \"load\", \"index\": \"" + what + "\", \"n\": " + std::to_string(n) + ", \"build_s\": " +
-       num(row.build_s) + ", \"save_s\": " + num(row.save_s) + ", \"file_mb\": " + num(row.file_mb) +
-       ", \"load_map_s\": " + num(row.map_s) + ", \"load_read_s\": " + num(row.read_s) +
-       ", \"open_s\": " + num(row.open_s) + ", \"checksums_s\": " + num(row.checksums_s) +
-       ", \"structure_s\": " + num(row.structure_s) + ", \"read_mapped_s\": " + num(row.touch_s) +
-       ", \"read_mapped_2_threads_s\": " + num(row.touch2_s) +
+  json("\"part\": \"load\", \"index\": \"" + what + "\", \"n\": " + std::to_string(n) +
+       ", \"build_s\": " + num(row.build_s) + ", \"save_s\": " + num(row.save_s) +
+       ", \"file_mb\": " + num(row.file_mb) + ", \"load_map_s\": " + num(row.map_s) +
+       ", \"load_read_s\": " + num(row.read_s) + ", \"open_s\": " + num(row.open_s) +
+       ", \"checksums_s\": " + num(row.checksums_s) + ", \"structure_s\": " + num(row.structure_s) +
+       ", \"read_mapped_s\": " + num(row.touch_s) + ", \"read_mapped_2_threads_s\": " + num(row.touch2_s) +
        ", \"faults\": " + num(row.faults) + ", \"same_answers\": " + (row.same ? "true" : "false"));
   return row;
 }
@@ -335,8 +339,8 @@ void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
       "once pays, page faults of its new memory included); again: repeated in this process, where malloc\n"
       "hands the build pages it already touched. The ratios use the fresh figures; \"÷ 1-thread build\"\n"
       "sets the load against the default build (BuildParams::threads = 1).\n\n"
-      "| threads | build, fresh s | faults | build, again s | faults | load, fresh ms | faults | load, again ms "
-      "| load ÷ build (same threads) | load ÷ 1-thread build |\n"
+      "| threads | build, fresh s | faults | build, again s | faults | load, fresh ms | faults | "
+      "load, again ms | load ÷ build (same threads) | load ÷ 1-thread build |\n"
       "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
       n, reps);
   for (unsigned t : {1u, 2u}) {
@@ -724,7 +728,7 @@ void part_updates(std::size_t scale, int reps) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc == 6 && std::string(argv[1]) == "--child")
+  if (argc == 6 && std::string(argv[1]) == "--child") {
     try {
       return child_run(std::string(argv[2]) == "build", static_cast<unsigned>(std::atoi(argv[3])),
                        static_cast<std::size_t>(std::atoll(argv[4])), argv[5]);
@@ -732,6 +736,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "kdspace-index-bench --child: %s\n", e.what());
       return 1;
     }
+  }
   std::size_t scale = 1;
   int reps = 5;
   std::string dir = std::filesystem::temp_directory_path().string(), only;
@@ -746,8 +751,9 @@ int main(int argc, char** argv) {
     else if (a == "--only" && i + 1 < argc)
       only = argv[++i];
     else {
-      std::fprintf(stderr,
-                   "usage: kdspace-index-bench [--quick] [--reps R] [--dir DIR] [--only load|updates|process]\n");
+      std::fprintf(
+          stderr,
+          "usage: kdspace-index-bench [--quick] [--reps R] [--dir DIR] [--only load|updates|process]\n");
       return 2;
     }
   }
