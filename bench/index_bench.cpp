@@ -260,26 +260,33 @@ struct Timed {
   double faults = 0;
 };
 
-Timed timed(const std::function<void()>& work) {
+// Times work() (which returns what it made: freeing it is not timed) and counts its minor page faults.
+template <class Work>
+Timed timed(Work work) {
   const long faults_before = minor_faults();
   const Clock::time_point start = Clock::now();
-  work();
+  const auto made = work();
   return {seconds_since(start), static_cast<double>(minor_faults() - faults_before)};
 }
 
-// In the child: one build (path empty) or one mapped load of `path`, on `threads`; prints its Timed.
+using Tree3 = kdspace::PointTree<float>;
+
+Tree3 build_tree(const std::vector<float>& base, std::size_t n, unsigned threads) {
+  kdspace::BuildParams params;
+  params.threads = threads;
+  return Tree3(base.data(), n, 3, params);
+}
+
+Tree3 load_tree(const std::string& path, unsigned threads) {
+  return kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, threads);
+}
+
+// In the child: one build of the parent's points, or one mapped load of `path`, on `threads`; prints
+// its Timed.
 int child_run(bool build, unsigned threads, std::size_t n, const std::string& path) {
-  using Tree = kdspace::PointTree<float>;
   const auto base = build ? uniform_points(n, 3, 1) : std::vector<float>();
-  const Timed t = timed([&] {
-    if (build) {
-      kdspace::BuildParams params;
-      params.threads = threads;
-      const Tree tree(base.data(), n, 3, params);
-    } else {
-      const Tree loaded = kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, threads);
-    }
-  });
+  const Timed t = build ? timed([&] { return build_tree(base, n, threads); })
+                        : timed([&] { return load_tree(path, threads); });
   std::printf("%.9g %.0f\n", t.seconds, t.faults);
   return 0;
 }
@@ -295,6 +302,7 @@ std::string self_path() {
 Timed in_fresh_process(bool build, unsigned threads, std::size_t n, const std::string& path) {
   const std::string command = "'" + self_path() + "' --child " + (build ? "build " : "load ") +
                               std::to_string(threads) + " " + std::to_string(n) + " '" + path + "'";
+  if (path.find('\'') != std::string::npos) throw std::runtime_error("a quote in " + path);
   FILE* pipe = ::popen(command.c_str(), "r");
   Timed t;
   const bool ok = pipe && std::fscanf(pipe, "%lf %lf", &t.seconds, &t.faults) == 2;
@@ -305,20 +313,15 @@ Timed in_fresh_process(bool build, unsigned threads, std::size_t n, const std::s
 void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
   const auto base = uniform_points(n, 3, 1);
   const std::string path = dir + "/bench-tree-threads.kdx";
-  using Tree = kdspace::PointTree<float>;
-  kdspace::io::save(path, Tree(base.data(), n, 3));
+  kdspace::io::save(path, build_tree(base, n, 1));
   // [threads - 1]: fresh-process and repeated in-process builds and loads
   std::vector<Timed> fresh_build[2], fresh_load[2], again_build[2], again_load[2];
   for (int r = 0; r < reps; ++r) {
     for (unsigned threads : {1u, 2u}) {
       fresh_build[threads - 1].push_back(in_fresh_process(true, threads, n, path));
       fresh_load[threads - 1].push_back(in_fresh_process(false, threads, n, path));
-      kdspace::BuildParams params;
-      params.threads = threads;
-      again_build[threads - 1].push_back(timed([&] { const Tree tree(base.data(), n, 3, params); }));
-      again_load[threads - 1].push_back(timed([&] {
-        const Tree loaded = kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, threads);
-      }));
+      again_build[threads - 1].push_back(timed([&] { return build_tree(base, n, threads); }));
+      again_load[threads - 1].push_back(timed([&] { return load_tree(path, threads); }));
     }
   }
   std::filesystem::remove(path);
@@ -337,8 +340,9 @@ void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
       "(median of %d each, interleaved)\n\n"
       "Fresh: each build or load the first in a new process (what `kdspace index` or a program that builds\n"
       "once pays, page faults of its new memory included); again: repeated in this process, where malloc\n"
-      "hands the build pages it already touched. The ratios use the fresh figures; \"÷ 1-thread build\"\n"
-      "sets the load against the default build (BuildParams::threads = 1).\n\n"
+      "may hand the build pages it already touched (the faults say how many it did not). The ratios use\n"
+      "the fresh figures; \"÷ 1-thread build\" sets the load against the default build\n"
+      "(BuildParams::threads = 1).\n\n"
       "| threads | build, fresh s | faults | build, again s | faults | load, fresh ms | faults | "
       "load, again ms | load ÷ build (same threads) | load ÷ 1-thread build |\n"
       "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
