@@ -120,7 +120,8 @@ struct LoadRow {
   std::size_t n = 0;
   double build_s = 0, save_s = 0, file_mb = 0, map_s = 0, read_s = 0;
   double open_s = 0, checksums_s = 0, structure_s = 0, touch_s = 0, touch2_s = 0;  // the parts, alone, min
-  double faults = 0;  // minor page faults of a whole mapped load (mean)
+  double faults = 0;        // minor page faults of a whole mapped load (mean)
+  double build_faults = 0;  // minor page faults of the build (the first of its kind in this process)
   bool same = false;
 };
 
@@ -212,9 +213,11 @@ LoadRow load_against_build(const std::string& what, std::size_t n, const std::st
   row.what = what;
   row.n = n;
   std::fprintf(stderr, "index-bench: building %s\n", what.c_str());
+  const long build_faults_before = minor_faults();
   Clock::time_point start = Clock::now();
   const Index built = build();
   row.build_s = seconds_since(start);
+  row.build_faults = static_cast<double>(minor_faults() - build_faults_before);
   start = Clock::now();
   kdspace::io::save(path, built);
   row.save_s = seconds_since(start);
@@ -239,9 +242,9 @@ LoadRow load_against_build(const std::string& what, std::size_t n, const std::st
   all_agree = all_agree && row.same;
   std::filesystem::remove(path);
   json("\"part\": \"load\", \"index\": \"" + what + "\", \"n\": " + std::to_string(n) +
-       ", \"build_s\": " + num(row.build_s) + ", \"save_s\": " + num(row.save_s) +
-       ", \"file_mb\": " + num(row.file_mb) + ", \"load_map_s\": " + num(row.map_s) +
-       ", \"load_read_s\": " + num(row.read_s) + ", \"open_s\": " + num(row.open_s) +
+       ", \"build_s\": " + num(row.build_s) + ", \"build_faults\": " + num(row.build_faults) +
+       ", \"save_s\": " + num(row.save_s) + ", \"file_mb\": " + num(row.file_mb) + ", \"load_map_s\": " +
+       num(row.map_s) + ", \"load_read_s\": " + num(row.read_s) + ", \"open_s\": " + num(row.open_s) +
        ", \"checksums_s\": " + num(row.checksums_s) + ", \"structure_s\": " + num(row.structure_s) +
        ", \"read_mapped_s\": " + num(row.touch_s) + ", \"read_mapped_2_threads_s\": " + num(row.touch2_s) +
        ", \"faults\": " + num(row.faults) + ", \"same_answers\": " + (row.same ? "true" : "false"));
@@ -425,12 +428,12 @@ void part_load(std::size_t scale, int reps, const std::string& dir) {
   }
   std::printf("\n### Loading a saved index against building it (median of %d loads)\n\n", reps);
   std::printf(
-      "| index | n | build s | save s | file MB | load, mapped s | mapped ÷ build | load, read s | same "
-      "answers |\n");
-  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|:---:|\n");
+      "| index | n | build s | build's page faults | save s | file MB | load, mapped s | mapped ÷ build | "
+      "load, read s | same answers |\n");
+  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|:---:|\n");
   for (const LoadRow& r : rows)
-    std::printf("| %s | %zu | %.3f | %.3f | %.1f | %.4f | %.2f%% | %.4f | %s |\n", r.what.c_str(), r.n,
-                r.build_s, r.save_s, r.file_mb, r.map_s, 100 * r.map_s / r.build_s, r.read_s,
+    std::printf("| %s | %zu | %.3f | %.0f | %.3f | %.1f | %.4f | %.2f%% | %.4f | %s |\n", r.what.c_str(), r.n,
+                r.build_s, r.build_faults, r.save_s, r.file_mb, r.map_s, 100 * r.map_s / r.build_s, r.read_s,
                 r.same ? "yes" : "NO");
   std::printf(
       "\nWhere a mapped load's time goes: each part alone (min of %d), on one thread but for a large point\n"
