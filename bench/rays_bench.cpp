@@ -80,7 +80,7 @@
 //
 // usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--real DIR] [--voxels R]
 //                           [--only-real] [--reps R] [--rays M] [--image WxH] [--quality medium,high]
-//                           [--tri-quality medium,high] [--robust] [--cpu-time] [--quick]
+//                           [--tri-quality medium,high] [--robust] [--cpu-time] [--quick] [--counts]
 //   --sizes     synthetic scene sizes in boxes (default 1000,100000,1000000; 1e5 is accepted)
 //   --kinds     synthetic scene kinds (default uniform,clustered)
 //   --real      a folder filled by bench/real_data/fetch.sh: adds the mesh and voxel scenes
@@ -96,6 +96,9 @@
 //               for a machine shared with other jobs
 //   --quick     sizes 1000,100000, 200000 random rays, a 512x384 image, 1 repetition (explicit options
 //               still win)
+//   --counts    no timing: per scene and ray set (primary, random) the boxes Embree's user geometry tests
+//               per ray (callback calls) beside kdspace's nodes and boxes per ray, split into inner nodes,
+//               leaves, empty leaves, references and distinct boxes (rays_counts.hpp)
 //
 // Output: per scene a markdown table, a profile line and an agreement table, then one JSON line per
 // measurement ({"bench":"rays",...}); at the end a summary table of kdspace against the peer on every
@@ -124,6 +127,7 @@
 #include "kdspace/rays/detail/slab.hpp"
 #include "kdspace/rays/scene_gen.hpp"
 #include "bench_args.hpp"
+#include "rays_counts.hpp"
 #include "rays_scenes.hpp"
 
 namespace {
@@ -195,6 +199,7 @@ struct Options {
   std::size_t voxel_resolution = 256;
   bool synthetic = true;
   bool cpu_time = false;
+  bool counts = false;  ///< --counts: work per ray only (print_counts), no timing
 };
 
 [[noreturn]] void usage(const char* problem) {
@@ -203,7 +208,7 @@ struct Options {
       stderr,
       "usage: kdspace-rays-bench [--sizes N,N,...] [--kinds uniform,clustered] [--real DIR] [--voxels R]\n"
       "                          [--only-real] [--reps R] [--rays M] [--image WxH] [--quality medium,high]\n"
-      "                          [--tri-quality medium,high] [--robust] [--cpu-time] [--quick]\n");
+      "                          [--tri-quality medium,high] [--robust] [--cpu-time] [--quick] [--counts]\n");
   std::exit(2);
 }
 
@@ -278,6 +283,8 @@ Options parse(int argc, char** argv) {
       o.synthetic = false;
     } else if (a == "--cpu-time") {
       o.cpu_time = true;
+    } else if (a == "--counts") {
+      o.counts = true;
     } else if (a == "--quick") {
       quick = true;
     } else if (a == "--help" || a == "-h") {
@@ -319,6 +326,7 @@ struct RayContext {
   RTCIntersectContext embree;
   kdspace::detail::PreparedRay ray;   // the very preparation and slab test of kdspace's traversal
   std::int32_t occluder = Hit::none;  ///< the box that ended a shadow ray
+  std::uint32_t callbacks = 0;        ///< boxes Embree handed the callbacks (--counts)
 
   explicit RayContext(const Ray& r) : ray(r) { rtcInitIntersectContext(&embree); }
 };
@@ -348,7 +356,9 @@ void box_intersect(const RTCIntersectFunctionNArguments* args) {
   if (args->N != 1) not_single(args->N);
   if (args->valid[0] == 0) return;
   const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
-  const kdspace::detail::PreparedRay& ray = reinterpret_cast<const RayContext*>(args->context)->ray;
+  auto* context = reinterpret_cast<RayContext*>(args->context);
+  ++context->callbacks;
+  const kdspace::detail::PreparedRay& ray = context->ray;
   RTCRayN* rays = RTCRayHitN_RayN(args->rayhit, 1);
   RTCHitN* hits = RTCRayHitN_HitN(args->rayhit, 1);
   float& tfar = RTCRayN_tfar(rays, 1, 0);
@@ -378,6 +388,7 @@ void box_occluded(const RTCOccludedFunctionNArguments* args) {
   if (args->valid[0] == 0) return;
   const Box3f& b = static_cast<const Box3f*>(args->geometryUserPtr)[args->primID];
   auto* context = reinterpret_cast<RayContext*>(args->context);
+  ++context->callbacks;
   float& tfar = RTCRayN_tfar(args->ray, 1, 0);
   double t_near = RTCRayN_tnear(args->ray, 1, 0), t_far = tfar;
   if (!clip_to_box(b, context->ray, t_near, t_far)) return;
@@ -552,12 +563,14 @@ class EmbreeContender final : public Contender {
     const RTCScene scene = scene_;
     const bool triangles = triangles_;
     for_chunks(set.rays.size(), threads, [&](std::size_t begin, std::size_t end) {
+      std::uint64_t callbacks = 0;
       for (std::size_t i = begin; i < end; ++i) {
         const Ray& ray = set.rays[i];
         if (set.any_hit) {
           RTCRay r = make_ray(ray, set.t_min, set.t_max);
           RayContext context(ray);
           rtcOccluded1(scene, &context.embree, &r);
+          callbacks += context.callbacks;
           // Triangles do not say which box ended the ray: box 0 stands for "some box" there.
           if (r.tfar < 0) hits[i] = Hit{triangles ? 0 : context.occluder, 0};
           continue;
@@ -572,13 +585,17 @@ class EmbreeContender final : public Contender {
         } else {
           RayContext context(ray);  // the reciprocal direction etc., once per ray, as kdspace does
           rtcIntersect1(scene, &context.embree, &rh);
+          callbacks += context.callbacks;
           if (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID)
             hits[i] = Hit{static_cast<std::int32_t>(rh.hit.primID), rh.ray.tfar};
         }
       }
+      callbacks_ += callbacks;
     });
     return hits;
   }
+  /// Boxes handed to the user-geometry callbacks by all trace() calls so far (one box, one call).
+  std::uint64_t callbacks() const { return callbacks_.load(); }
 
   void release() override {
     if (scene_) rtcReleaseScene(scene_);
@@ -621,6 +638,7 @@ class EmbreeContender final : public Contender {
   bool robust_;
   RTCScene scene_ = nullptr;
   std::size_t bytes_ = 0;
+  mutable std::atomic<std::uint64_t> callbacks_{0};
 };
 
 // ---- agreement ------------------------------------------------------------------------------------
@@ -830,6 +848,72 @@ void print_profile(const Scene& scene, const std::array<RaySet, 3>& sets) {
       (tree.closest_hit(r, set.t_min, set.t_max).hit() ? hitting : missing).rays.push_back(r);
     print_profile_row(scene, tree, hitting, std::string(set.name) + ", hitting");
     print_profile_row(scene, tree, missing, std::string(set.name) + ", missing");
+  }
+}
+
+/// --counts: the work per ray on one scene, without timing. Embree: the boxes its BVH hands the
+/// user-geometry callback (one call, one box); kdspace: the library's own counters (RayStats) and a
+/// walk of its tree in the same order (rays_counts.hpp) that splits the work into inner nodes, leaves,
+/// empty leaves, box references and distinct boxes.
+void print_counts(const Options& o, const Scene& scene, RTCDevice device) {
+  const Box3f bounds = scene_bounds(scene.boxes);
+  const std::array<RaySet, 2> sets{
+      RaySet{"primary", false,
+             kdspace::primary_rays(kdspace::fit_camera(bounds, dbl(o.width) / dbl(o.height)), o.width,
+                                   o.height)},
+      RaySet{"random", false, kdspace::random_rays(o.random_rays, bounds, 2)}};
+  const kdspace::BoxTree tree(scene.boxes);
+  const kdspace::BoxTreeStats& t = tree.stats();
+  std::printf(
+      "\n### counts: %s, %zu boxes\n\nkdspace tree: SAH cost %.2f, %zu leaves (%zu empty), depth %zu, "
+      "%.2f references per box, %.2f boxes per non-empty leaf, fullest leaf %zu.\n\n",
+      scene.name.c_str(), scene.boxes.size(), t.sah_cost, t.leaves, t.empty_leaves, t.depth,
+      t.references_per_box, dbl(t.references) / dbl(std::max<std::size_t>(1, t.leaves - t.empty_leaves)),
+      t.max_leaf_size);
+  std::vector<std::unique_ptr<EmbreeContender>> embree;
+  for (const RTCBuildQuality q : o.user_qualities) {
+    embree.push_back(std::make_unique<EmbreeContender>(device, false, q, o.robust));
+    embree.back()->build(scene.boxes);
+  }
+  std::printf("| rays | count | hit %% |");
+  for (const auto& e : embree) std::printf(" %s boxes / ray |", e->name().c_str());
+  std::printf(
+      " kdspace nodes / ray | boxes tested / ray | walk: inner nodes | leaves | empty leaves | leaves "
+      "after a hit | references | distinct boxes |\n|---|---:|---:|");
+  for (std::size_t e = 0; e < embree.size(); ++e) std::printf("---:|");
+  std::printf("---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::vector<bool> seen(scene.boxes.size(), false);
+  for (const RaySet& set : sets) {
+    const double n = dbl(set.rays.size());
+    std::printf("| %s | %zu |", set.name, set.rays.size());
+    kdspace::RayStats stats;
+    tree.closest_hit_batch(set.rays, 1, &stats);
+    kdspace::bench::TreeWalkCounts walk;
+    for (const Ray& r : set.rays) kdspace::bench::walk_closest_hit(tree, r, set.t_min, set.t_max, walk, seen);
+    std::printf(" %.1f |", 100.0 * dbl(walk.rays_hitting) / n);
+    std::string json;
+    for (const auto& e : embree) {
+      const std::uint64_t before = e->callbacks();
+      e->trace(set, 1);
+      const double per_ray = dbl(e->callbacks() - before) / n;
+      std::printf(" %.2f |", per_ray);
+      char field[96];
+      std::snprintf(field, sizeof field, "\"%s_boxes_per_ray\":%.4f,", e->name().c_str(), per_ray);
+      json += field;
+    }
+    std::printf(" %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f |\n", stats.nodes_visited_per_ray(),
+                stats.boxes_tested_per_ray(), dbl(walk.inner_nodes) / n, dbl(walk.leaves) / n,
+                dbl(walk.empty_leaves) / n, dbl(walk.leaves_after_hit) / n, dbl(walk.references) / n,
+                dbl(walk.distinct_boxes) / n);
+    std::printf(
+        "{\"bench\":\"rays-counts\",\"scene\":\"%s\",\"boxes\":%zu,\"rays\":\"%s\",\"count\":%zu,%s"
+        "\"nodes_per_ray\":%.4f,\"boxes_tested_per_ray\":%.4f,\"inner_nodes_per_ray\":%.4f,"
+        "\"leaves_per_ray\":%.4f,\"empty_leaves_per_ray\":%.4f,\"leaves_after_hit_per_ray\":%.4f,"
+        "\"references_per_ray\":%.4f,\"distinct_boxes_per_ray\":%.4f}\n",
+        scene.name.c_str(), scene.boxes.size(), set.name, set.rays.size(), json.c_str(),
+        stats.nodes_visited_per_ray(), stats.boxes_tested_per_ray(), dbl(walk.inner_nodes) / n,
+        dbl(walk.leaves) / n, dbl(walk.empty_leaves) / n, dbl(walk.leaves_after_hit) / n,
+        dbl(walk.references) / n, dbl(walk.distinct_boxes) / n);
   }
 }
 
@@ -1099,6 +1183,11 @@ int main(int argc, char** argv) {
       contenders.push_back(std::make_unique<EmbreeContender>(device, false, q, o.robust));
     for (const RTCBuildQuality q : o.triangle_qualities)
       contenders.push_back(std::make_unique<EmbreeContender>(device, true, q, o.robust));
+    if (o.counts) {
+      for (const Scene& scene : scenes) print_counts(o, scene, device);
+      rtcReleaseDevice(device);
+      return 0;
+    }
     std::vector<SceneSummary> summary;
     for (const Scene& scene : scenes)
       if (!run_scene(o, scene, contenders, summary)) agree = false;
