@@ -305,6 +305,10 @@ class BoxTree {
   /// trace<float, AnyHit> with eight-box leaf tests, for processors with AVX2.
   template <bool AnyHit>
   Hit trace_wide(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
+  /// trace<float, AnyHit>, with eight-box leaf tests where avx2_dispatch(): for rays that
+  /// detail::fits_float_traversal in a tree with float_range_.
+  template <bool AnyHit>
+  Hit trace_in_float(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
   template <bool AnyHit>
   Hit trace_any_precision(const Ray& ray, float t_min, float t_max, RayStats& stats) const;
   template <bool AnyHit>
