@@ -152,8 +152,12 @@ class KnnRule {
           const auto offer = [&](std::uint32_t j, T d) {
             if (d <= kth && !(same_leaf && j == i) && table_.offer(i, d, reference_.index(j))) kth = table_.kth(i);
           };
-          if (same_leaf) distances_within_leaf<Isa>(reference_, r, i, space_, kth, offer);
-          else distances_to_leaf<Isa>(reference_, r, rn.begin, a, space_, kth, offer);
+          // In its own leaf a point is offered first the points within the k-th distance of the
+          // point before it (a neighbour in the leaf, with a k-th of about the same size).
+          if (same_leaf && i > qn.begin)
+            distances_to_leaf_nearer_first<Isa>(reference_, r, a, space_, kth, table_.kth(i - 1), offer);
+          else
+            distances_to_leaf<Isa>(reference_, r, rn.begin, a, space_, kth, offer);
         });
     T leaf_bound = 0;
     for (std::uint32_t i = qn.begin; i < qn.end; ++i) leaf_bound = std::max(leaf_bound, table_.kth(i));

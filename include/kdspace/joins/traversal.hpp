@@ -267,6 +267,36 @@ void distance_blocks(const Tree& reference, std::uint32_t id, std::uint32_t firs
   }
 }
 
+/// The distances from point `a` to the points [first, leaf.end) of reference leaf `id`, of at most
+/// leaf_mask_points points, into all[position - leaf.begin], and for each limit the mask of the
+/// positions (bit position - leaf.begin) whose distance is at most that limit.
+inline constexpr std::size_t leaf_mask_points = 64;
+template <class Isa, std::size_t Limits, class Tree, class Space, class T>
+std::array<std::uint64_t, Limits> near_masks(const Tree& reference, std::uint32_t id, std::uint32_t first,
+                                             const T* a, const Space& space,
+                                             const std::array<T, Limits>& limits,
+                                             std::array<T, leaf_mask_points>& all) {
+  const std::uint32_t begin = reference.node(id).begin;
+  std::array<std::uint64_t, Limits> near{};
+  distance_blocks(reference, id, first, a, space, [&](const auto& dist, unsigned keep, std::uint32_t base) {
+    const std::size_t at = base - begin;
+    for (std::size_t l = 0; l < Limits; ++l)
+      near[l] |= std::uint64_t{at_most(dist, limits[l], Isa{}) & keep} << at;
+    std::copy(dist.begin(), dist.end(), all.begin() + static_cast<std::ptrdiff_t>(at));
+  });
+  return near;
+}
+
+/// visit(begin + j, all[j]) for each bit j of `bits`, in order.
+template <class T, class Visit>
+void visit_bits(std::uint64_t bits, std::uint32_t begin, const std::array<T, leaf_mask_points>& all,
+                Visit&& visit) {
+  while (bits) {
+    const unsigned j = take_lowest_bit(bits);
+    visit(begin + j, all[j]);
+  }
+}
+
 /// distance_blocks, point by point: visit(position, distance) for the points at most `limit` (read
 /// for each block; a k-NN join lowers it as it goes, and checks again what it is offered), in order.
 ///
@@ -276,22 +306,13 @@ void distance_blocks(const Tree& reference, std::uint32_t id, std::uint32_t firs
 /// pairs within r 563.1e6 -> 547.5e6 instructions, 3.57e6 -> 3.02e6 mispredicted branches; self-join
 /// k = 10 1346e6 -> 1352e6 instructions, 13.23e6 -> 12.49e6 mispredicted).
 template <class Isa, class Tree, class Space, class T, class Visit>
-void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a, const Space& space,
-                       const T& limit, Visit&& visit) {
-  constexpr std::size_t most = 64;
+void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t first, const T* a,
+                       const Space& space, const T& limit, Visit&& visit) {
   const auto& leaf = reference.node(id);
-  if (leaf.count() <= most) {
-    std::array<T, most> all;
-    std::uint64_t near = 0;
-    distance_blocks(reference, id, first, a, space, [&](const auto& dist, unsigned keep, std::uint32_t base) {
-      const std::size_t at = base - leaf.begin;
-      near |= std::uint64_t{at_most(dist, limit, Isa{}) & keep} << at;
-      std::copy(dist.begin(), dist.end(), all.begin() + static_cast<std::ptrdiff_t>(at));
-    });
-    while (near) {
-      const unsigned j = take_lowest_bit(near);
-      visit(leaf.begin + j, all[j]);
-    }
+  if (leaf.count() <= leaf_mask_points) {
+    std::array<T, leaf_mask_points> all;
+    const auto near = near_masks<Isa>(reference, id, first, a, space, std::array<T, 1>{limit}, all);
+    visit_bits(near[0], leaf.begin, all, visit);
     return;
   }
   distance_blocks(reference, id, first, a, space, [&](const auto& dist, unsigned keep, std::uint32_t base) {
@@ -303,33 +324,19 @@ void distances_to_leaf(const Tree& reference, std::uint32_t id, std::uint32_t fi
   });
 }
 
-/// distances_to_leaf from a point of the leaf itself, at position `pos`, to every point of the leaf:
-/// the point's own block of 8 first, then the others in the order of their numbers XOR its own (the
-/// neighbouring block next, then the other half of the leaf, and so on). Positions follow the tree,
-/// so blocks near in that order hold points near in space, and a k-NN row offered them first gets a
-/// small k-th sooner and takes fewer candidates that a nearer one evicts later.
+/// distances_to_leaf from point `a` to every point of leaf `id`, those at most `guess` first (a
+/// guess at the limit that `limit` will come down to: offered the nearer points first, a k-NN row
+/// takes fewer that a nearer one evicts later), then the others at most `limit`.
 template <class Isa, class Tree, class Space, class T, class Visit>
-void distances_within_leaf(const Tree& tree, std::uint32_t id, std::uint32_t pos, const Space& space,
-                           const T& limit, Visit&& visit) {
-  constexpr std::size_t block = Tree::column_block;
-  const auto& leaf = tree.node(id);
-  const std::size_t stride = Tree::column_stride(leaf), blocks = stride / block;
-  const std::size_t own = (pos - leaf.begin) / block;
-  std::size_t span = 1;
-  while (span < blocks) span *= 2;
-  const T* columns = tree.columns(id);
-  const T* a = tree.point(pos);
-  for (std::size_t t = 0; t < span; ++t) {
-    const std::size_t start = (own ^ t) * block;
-    if (start >= leaf.count()) continue;
-    const std::array<T, block> dist = space.template distances<block>(a, columns + start, stride, tree.dim());
-    const std::size_t in_leaf = std::min<std::size_t>(leaf.count() - start, block);
-    unsigned near = at_most(dist, limit, Isa{}) & (~0u >> (32 - in_leaf));
-    while (near) {
-      const unsigned j = take_lowest_bit(near);
-      visit(leaf.begin + static_cast<std::uint32_t>(start) + j, dist[j]);
-    }
-  }
+void distances_to_leaf_nearer_first(const Tree& reference, std::uint32_t id, const T* a, const Space& space,
+                                    const T& limit, T guess, Visit&& visit) {
+  const auto& leaf = reference.node(id);
+  if (leaf.count() > leaf_mask_points)
+    return distances_to_leaf<Isa>(reference, id, leaf.begin, a, space, limit, visit);
+  std::array<T, leaf_mask_points> all;
+  const auto near = near_masks<Isa>(reference, id, leaf.begin, a, space, std::array<T, 2>{limit, guess}, all);
+  visit_bits(near[0] & near[1], leaf.begin, all, visit);
+  visit_bits(near[0] & ~near[1], leaf.begin, all, visit);
 }
 
 /// The number of set bits of a block's mask of at most 8 bits (a table: the popcnt instruction is
