@@ -69,8 +69,12 @@ namespace detail {
 // 32: 1.31 s, 64: 1.70 s (block counts of leaves, callgrind, 2e5 points: 16: 5.45e9, 32: 5.64e9).
 // With the AVX2 base cases, whose distances cost less, larger leaves still lose (callgrind, 2e5
 // uniform 3-D points, double, whole program): k-NN 32: 1.315e9, 48: 1.343e9, 64: 1.394e9; pairs
-// 64: 0.587e9, 96: 0.612e9, 128: 0.653e9.
-inline constexpr std::size_t knn_leaf_points = 32;
+// 64: 0.587e9, 96: 0.612e9, 128: 0.653e9. Since a self-join offers a point's own leaf nearer first
+// (knn_rule.hpp), its insertions no longer grow with the leaf, and 48 beats 32 (callgrind
+// --branch-sim, 2e5 points, whole program, instructions / mispredicted branches: k = 10 1218.9e6 /
+// 11.08e6 -> 1208.1e6 / 10.54e6; k = 20 2236.5e6 / 17.17e6 -> 2159.5e6 / 16.06e6; k = 1 611.6e6 /
+// 3.24e6 -> 622.2e6 / 2.99e6), 64 does not (k = 10 1225.2e6 / 10.03e6).
+inline constexpr std::size_t knn_leaf_points = 48;
 inline constexpr std::size_t range_leaf_points = 64;
 inline constexpr std::size_t count_leaf_points = 16;
 
