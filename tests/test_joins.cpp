@@ -280,7 +280,7 @@ TEST_CASE("joins: the base cases on 3-D trees equal brute force", "[joins][exact
 }
 
 // In its own leaf a point of a self-join is offered first the points within the k-th distance of
-// the point before it, then the others: every k from 1 to past a leaf, leaves of the join's size and
+// the point before it, then the others: k from 2 to past a leaf, leaves of the join's size and
 // of more than 64 points (the block-by-block path), ties of distance (duplicates, grids, identical).
 TEST_CASE("joins: self-join k-NN on 3-D trees equals brute force for many k and leaf sizes",
           "[joins][exact]") {
