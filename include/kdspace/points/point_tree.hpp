@@ -31,6 +31,7 @@
 #include "kdspace/metric.hpp"
 #include "kdspace/points/detail/blocked_scan.hpp"
 #include "kdspace/points/detail/builder.hpp"
+#include "kdspace/points/detail/fixed_distance.hpp"
 #include "kdspace/points/detail/input_checks.hpp"
 #include "kdspace/points/detail/morton_order.hpp"
 #include "kdspace/points/detail/neighbor_output.hpp"
@@ -474,10 +475,21 @@ class PointTree {
         case 6: return scan_leaf_as<6>(leaf, ctx, results);
         case 7: return scan_leaf_as<7>(leaf, ctx, results);
         case 8: return scan_leaf_as<8>(leaf, ctx, results);
+        case 13: return scan_leaf_as<13>(leaf, ctx, results);
         default: break;
       }
     }
     scan_leaf_as<Dim>(leaf, ctx, results);
+  }
+
+  // The distance of the leaf scan: internal_distance(), or the same bits from a kernel written for a
+  // compile-time dimension of float L2 points (fixed_distance.hpp).
+  template <int D>
+  T leaf_distance(const T* q, const T* p, std::size_t d) const {
+    if constexpr (D >= 8 && std::is_same_v<T, float> && std::is_same_v<Metric, L2>)
+      return detail::l2_distance_fixed<static_cast<std::size_t>(D)>(q, p);
+    else
+      return internal_distance(metric_, q, p, d);
   }
 
   template <int D, class Results>
@@ -487,7 +499,7 @@ class PointTree {
     const T* p = points_.data() + first * d;
     if (leaf.all_identical()) {
       // One distance serves all; the indices are ascending, so the first refusal ends the scan.
-      const T dist = internal_distance(metric_, ctx.q, p, d);
+      const T dist = leaf_distance<D>(ctx.q, p, d);
       ++ctx.points_visited;
       for (std::size_t i = 0; i < count; ++i)
         if (!results.offer(dist, order_[first + i])) break;
@@ -497,7 +509,7 @@ class PointTree {
     if constexpr (detail::fills_at_once<Results>) {
       if (results.empty() && count <= Results::max_fill) {
         T dist[Results::max_fill];
-        for (std::size_t i = 0; i < count; ++i, p += d) dist[i] = internal_distance(metric_, ctx.q, p, d);
+        for (std::size_t i = 0; i < count; ++i, p += d) dist[i] = leaf_distance<D>(ctx.q, p, d);
         results.fill(dist, order_.data() + first, count);
         return;
       }
@@ -506,7 +518,7 @@ class PointTree {
     // the result set (and the original index) is touched. A tie with the bound may still enter.
     T worst = results.bound();
     for (std::size_t i = 0; i < count; ++i, p += d) {
-      const T dist = internal_distance(metric_, ctx.q, p, d);
+      const T dist = leaf_distance<D>(ctx.q, p, d);
       if (dist <= worst) {
         results.offer(dist, order_[first + i]);
         worst = results.bound();
