@@ -5,12 +5,15 @@
 #include <catch2/catch.hpp>
 
 #include <cstddef>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "kdspace/metric.hpp"
+#include "kdspace/points/detail/fixed_distance.hpp"
 #include "kdspace/points/detail/row_distances.hpp"
 
 namespace {
@@ -63,7 +66,36 @@ void check_all_dims() {
   }
 }
 
+// l2_distance_fixed<D> against internal_distance on rows whose values span many binary orders, so
+// that the squares differ in size and any other order of the additions would round differently.
+template <std::size_t D>
+void check_fixed(std::mt19937& rng) {
+  std::uniform_real_distribution<float> mantissa(-1, 1);
+  std::uniform_int_distribution<int> exponent(-12, 12);
+  std::vector<float> a(D), b(D);
+  for (int trial = 0; trial < 200; ++trial) {
+    for (std::size_t i = 0; i < D; ++i) {
+      a[i] = std::ldexp(mantissa(rng), exponent(rng));
+      b[i] = trial % 5 == 0 ? a[i] : std::ldexp(mantissa(rng), exponent(rng));  // some equal axes
+    }
+    CAPTURE(D, trial);
+    CHECK(kdspace::detail::l2_distance_fixed<D>(a.data(), b.data()) ==
+          kdspace::internal_distance<kdspace::L2>(a.data(), b.data(), D));
+  }
+}
+
+template <std::size_t... Ds>
+void check_fixed_dims(std::index_sequence<Ds...>) {
+  std::mt19937 rng(12);
+  (check_fixed<Ds + 1>(rng), ...);
+}
+
 }  // namespace
+
+TEST_CASE("fixed-dimension distance: the same bits as internal_distance in every dimension from 1 to 40",
+          "[points][exact]") {
+  check_fixed_dims(std::make_index_sequence<40>{});
+}
 
 TEST_CASE("row distances: the same bits as internal_distance, row by row", "[points][forest]") {
   check_all_dims<float, float>();
