@@ -475,26 +475,36 @@ class PointTree {
         case 6: return scan_leaf_as<6>(leaf, ctx, results);
         case 7: return scan_leaf_as<7>(leaf, ctx, results);
         case 8: return scan_leaf_as<8>(leaf, ctx, results);
-        case 9: return scan_leaf_as<9>(leaf, ctx, results);
-        case 10: return scan_leaf_as<10>(leaf, ctx, results);
-        case 11: return scan_leaf_as<11>(leaf, ctx, results);
-        case 12: return scan_leaf_as<12>(leaf, ctx, results);
-        case 13: return scan_leaf_as<13>(leaf, ctx, results);
-        case 14: return scan_leaf_as<14>(leaf, ctx, results);
-        case 15: return scan_leaf_as<15>(leaf, ctx, results);
-        case 16: return scan_leaf_as<16>(leaf, ctx, results);
-        case 17: return scan_leaf_as<17>(leaf, ctx, results);
-        case 18: return scan_leaf_as<18>(leaf, ctx, results);
-        case 19: return scan_leaf_as<19>(leaf, ctx, results);
-        case 20: return scan_leaf_as<20>(leaf, ctx, results);
-        case 21: return scan_leaf_as<21>(leaf, ctx, results);
-        case 22: return scan_leaf_as<22>(leaf, ctx, results);
-        case 23: return scan_leaf_as<23>(leaf, ctx, results);
-        case 24: return scan_leaf_as<24>(leaf, ctx, results);
         default: break;
       }
+      if (dim_ <= 24) return scan_leaf_wide(leaf, ctx, results);
     }
     scan_leaf_as<Dim>(leaf, ctx, results);
+  }
+
+  // 9 to 24 axes (descriptors: MFCC 13 and 20, 16-bin histograms), out of the search's line so that
+  // the few-axis scans above keep their code.
+  template <class Results>
+  [[gnu::noinline]] void scan_leaf_wide(const Node& leaf, Context& ctx, Results& results) const {
+    switch (dim_) {
+      case 9: return scan_leaf_as<9>(leaf, ctx, results);
+      case 10: return scan_leaf_as<10>(leaf, ctx, results);
+      case 11: return scan_leaf_as<11>(leaf, ctx, results);
+      case 12: return scan_leaf_as<12>(leaf, ctx, results);
+      case 13: return scan_leaf_as<13>(leaf, ctx, results);
+      case 14: return scan_leaf_as<14>(leaf, ctx, results);
+      case 15: return scan_leaf_as<15>(leaf, ctx, results);
+      case 16: return scan_leaf_as<16>(leaf, ctx, results);
+      case 17: return scan_leaf_as<17>(leaf, ctx, results);
+      case 18: return scan_leaf_as<18>(leaf, ctx, results);
+      case 19: return scan_leaf_as<19>(leaf, ctx, results);
+      case 20: return scan_leaf_as<20>(leaf, ctx, results);
+      case 21: return scan_leaf_as<21>(leaf, ctx, results);
+      case 22: return scan_leaf_as<22>(leaf, ctx, results);
+      case 23: return scan_leaf_as<23>(leaf, ctx, results);
+      case 24: return scan_leaf_as<24>(leaf, ctx, results);
+      default: return scan_leaf_as<Dim>(leaf, ctx, results);
+    }
   }
 
   // The distance of the leaf scan: internal_distance(), or the same bits from a kernel written for a
