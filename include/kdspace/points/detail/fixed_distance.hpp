@@ -5,7 +5,7 @@
 // internal_distance() (combine_axes, metric.hpp) keeps 8 lanes (lane j takes axes j, j+8, ...),
 // combines them pairwise ((j, j+4), then (j, j+2), then (0, 1)) and adds the remaining axes one by
 // one. Left to the compiler, that order at 13 axes came to about 66 instructions a point in the
-// leaf scan (callgrind, mfcc13 1-NN), 34 here. Here the squares are
+// leaf scan (callgrind, mfcc13 1-NN); 34 with this kernel. Here the squares are
 // computed four at a time, the lanes combined as above, and the remaining squares, still computed
 // four at a time, added one after the other in axis order: the same additions on the same values.
 // (A square is never -0, so starting a lane from its first square instead of 0 + square changes no
