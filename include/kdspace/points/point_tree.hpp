@@ -464,7 +464,7 @@ class PointTree {
   // that the distance loop unrolls as in a compile-time tree: a switch per leaf, which the branch
   // predictor learns at once. A PointTree<float> of 2..8-D points then answers as fast as
   // PointTree<float, D> (within 5%, where it was 8-18% slower); L1 and Linf keep their code small.
-  // From 9 to 24 axes the same, in scan_leaf_wide, where float leaves take l2_distance_fixed.
+  // Float from 9 to 24 axes the same, in scan_leaf_wide, with l2_distance_fixed as the distance.
   template <class Results>
   void scan_leaf(const Node& leaf, Context& ctx, Results& results) const {
     if constexpr (Dim == Dynamic && std::is_same_v<Metric, L2>) {
@@ -478,7 +478,7 @@ class PointTree {
         case 8: return scan_leaf_as<8>(leaf, ctx, results);
         default: break;
       }
-      if (dim_ <= 24) return scan_leaf_wide(leaf, ctx, results);
+      if (std::is_same_v<T, float> && dim_ <= 24) return scan_leaf_wide(leaf, ctx, results);
     }
     scan_leaf_as<Dim>(leaf, ctx, results);
   }
