@@ -53,6 +53,7 @@
 #include <random>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 #include <vector>
 
 #include "kdspace/io/index.hpp"
@@ -297,15 +298,18 @@ int child_run(bool build, unsigned threads, std::size_t n, const std::string& pa
 std::string self_path() {
   std::vector<char> buf(4096);
   const ssize_t len = ::readlink("/proc/self/exe", buf.data(), buf.size() - 1);
-  if (len <= 0) throw std::runtime_error("cannot read /proc/self/exe");
+  if (len <= 0 || static_cast<std::size_t>(len) >= buf.size() - 1)
+    throw std::runtime_error("cannot read /proc/self/exe (or its path is too long)");
   return std::string(buf.data(), static_cast<std::size_t>(len));
 }
 
 // Runs this program with --child and returns what it measured.
 Timed in_fresh_process(bool build, unsigned threads, std::size_t n, const std::string& path) {
-  const std::string command = "'" + self_path() + "' --child " + (build ? "build " : "load ") +
+  const std::string self = self_path();
+  for (const std::string& name : {self, path})
+    if (name.find('\'') != std::string::npos) throw std::runtime_error("a quote in " + name);
+  const std::string command = "'" + self + "' --child " + (build ? "build " : "load ") +
                               std::to_string(threads) + " " + std::to_string(n) + " '" + path + "'";
-  if (path.find('\'') != std::string::npos) throw std::runtime_error("a quote in " + path);
   FILE* pipe = ::popen(command.c_str(), "r");
   Timed t;
   const bool ok = pipe && std::fscanf(pipe, "%lf %lf", &t.seconds, &t.faults) == 2;
@@ -316,7 +320,15 @@ Timed in_fresh_process(bool build, unsigned threads, std::size_t n, const std::s
 void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
   const auto base = uniform_points(n, 3, 1);
   const std::string path = dir + "/bench-tree-threads.kdx";
+  if (path.find('\'') != std::string::npos) throw std::runtime_error("a quote in " + path);
   kdspace::io::save(path, build_tree(base, n, 1));
+  struct RemoveAtEnd {  // the file goes when this table ends, a failed child run included
+    const std::string& path;
+    ~RemoveAtEnd() {
+      std::error_code ignored;
+      std::filesystem::remove(path, ignored);
+    }
+  } remove_at_end{path};
   // [threads - 1]: fresh-process and repeated in-process builds and loads
   std::vector<Timed> fresh_build[2], fresh_load[2], again_build[2], again_load[2];
   for (int r = 0; r < reps; ++r) {
@@ -327,7 +339,6 @@ void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
       again_load[threads - 1].push_back(timed([&] { return load_tree(path, threads); }));
     }
   }
-  std::filesystem::remove(path);
   const auto seconds = [](const std::vector<Timed>& v) {
     std::vector<double> s;
     for (const Timed& t : v) s.push_back(t.seconds);

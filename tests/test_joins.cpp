@@ -280,22 +280,22 @@ TEST_CASE("joins: the base cases on 3-D trees equal brute force", "[joins][exact
 }
 
 // In its own leaf a point of a self-join is offered first the points within the k-th distance of
-// the point before it, then the others: k from 2 to past a leaf, leaves of the join's size and
-// of more than 64 points (the block-by-block path), ties of distance (duplicates, grids, identical).
-TEST_CASE("joins: self-join k-NN on 3-D trees equals brute force for many k and leaf sizes",
-          "[joins][exact]") {
-  std::uint32_t seed = 500;
+// the point before it, then the others: k from 2 to past a leaf, leaves of the join's size, of 49 to
+// 64 points (a tree leaf of 60: the high bits of the leaf's masks) and of more than 64 points (the
+// block-by-block path), ties of distance (duplicates, grids, identical); float and double.
+template <class T>
+void check_self_knn_nearer_first(std::uint32_t seed) {
   for (const Shape shape :
        {Shape::uniform, Shape::clustered, Shape::duplicates, Shape::grid, Shape::identical, Shape::flat}) {
-    for (const std::size_t leaf_size : {std::size_t{24}, std::size_t{100}}) {
+    for (const std::size_t leaf_size : {std::size_t{24}, std::size_t{60}, std::size_t{100}}) {
       const std::size_t n = 600, dim = 3;
-      CAPTURE(kdspace_test::name(shape), leaf_size);
-      const Torus<double> space({}, dim);
-      const std::vector<double> points = make_points<double>(shape, n, dim, seed++);
+      CAPTURE(kdspace_test::name(shape), leaf_size, kdspace_test::type_name<T>());
+      const Torus<T> space({}, dim);
+      const std::vector<T> points = make_points<T>(shape, n, dim, seed++);
       kdspace::BuildParams build;
       build.leaf_size = leaf_size;
-      const PointTree<double, 3> tree(points.data(), n, dim, build);
-      const auto table = DistanceTable<double>::make<kdspace::L2>(space, points, points);
+      const PointTree<T, 3> tree(points.data(), n, dim, build);
+      const auto table = DistanceTable<T>::template make<kdspace::L2>(space, points, points);
       JoinParams params;
       params.threads = 1;
       for (const std::size_t k : {2, 5, 10, 16, 33, 70}) {
@@ -305,6 +305,12 @@ TEST_CASE("joins: self-join k-NN on 3-D trees equals brute force for many k and 
       }
     }
   }
+}
+
+TEST_CASE("joins: self-join k-NN on 3-D trees equals brute force for many k and leaf sizes",
+          "[joins][exact]") {
+  check_self_knn_nearer_first<double>(500);
+  check_self_knn_nearer_first<float>(600);
 }
 
 // A few thousand points: the found pairs go to buckets of several first indices each, and the runs

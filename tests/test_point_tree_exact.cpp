@@ -669,6 +669,9 @@ TEST_CASE("exact: trees with a compile-time dimension answer knn bit for bit lik
   knn_matches_brute_force<double, kdspace::L2, 2>({shape, 2000, 2, 9001}, every_split_rule(), 10, bad);
   knn_matches_brute_force<float, kdspace::L1, 4>({shape, 1000, 4, 9002}, fewer_split_rules(), 10, bad);
   knn_matches_brute_force<double, kdspace::Linf, 1>({shape, 1000, 1, 9003}, fewer_split_rules(), 10, bad);
+  // Float L2 from 8 axes on: the SSE2 leaf distance of a compile-time dimension (fixed_distance.hpp).
+  knn_matches_brute_force<float, kdspace::L2, 13>({shape, 1000, 13, 9004}, fewer_split_rules(), 10, bad);
+  knn_matches_brute_force<float, kdspace::L2, 20>({shape, 600, 20, 9005}, fewer_split_rules(), 10, bad);
   bad.done();
 }
 

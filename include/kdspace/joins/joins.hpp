@@ -73,8 +73,10 @@ namespace detail {
 // (knn_rule.hpp), its insertions no longer grow with the leaf, and 48 beats 32 (callgrind
 // --branch-sim, 2e5 points, whole program, instructions / mispredicted branches: k = 10 1218.9e6 /
 // 11.08e6 -> 1208.1e6 / 10.54e6; k = 20 2236.5e6 / 17.17e6 -> 2159.5e6 / 16.06e6; k = 1 611.6e6 /
-// 3.24e6 -> 622.2e6 / 2.99e6), 64 does not (k = 10 1225.2e6 / 10.03e6).
-inline constexpr std::size_t knn_leaf_points = 48;
+// 3.24e6 -> 622.2e6 / 2.99e6), 64 does not (k = 10 1225.2e6 / 10.03e6). A join of two sets, and a
+// PeriodicTree, offer no leaf nearer first, so they keep 32 (the 1.315e9 above).
+inline constexpr std::size_t knn_leaf_points = 32;
+inline constexpr std::size_t self_knn_leaf_points = 48;
 inline constexpr std::size_t range_leaf_points = 64;
 inline constexpr std::size_t count_leaf_points = 16;
 
@@ -94,7 +96,7 @@ struct Joins {
     if (k > available)
       throw Error("k = " + std::to_string(k) + " exceeds the number of " + (self ? "other points (" : "points (") +
                   std::to_string(available) + ")");
-    const BoundedPair trees(queries, reference, knn_leaf_points);
+    const BoundedPair trees(queries, reference, self ? self_knn_leaf_points : knn_leaf_points);
     const std::vector<T> period = trees.periods(params);
     return with_space(period, [&](const auto& space) {
       return knn_join_trees<Metric>(trees.first, trees.second(), k, self, space, params.threads, stats);

@@ -9,8 +9,9 @@
 // the bound's term is no larger (lower bound) or no smaller (upper bound) than the point pair's term,
 // and so is their combination. A pair of cells is therefore pruned, or counted whole, by comparing its
 // bound with a radius or a k-th distance directly, and never loses or adds a point, even at equal
-// distances. (This relies on IEEE arithmetic without contraction into fused multiply-adds, which ISO
-// C++ mode, -std=c++17, gives with GCC and Clang.)
+// distances. (This relies on IEEE arithmetic without contraction into fused multiply-adds. GCC in
+// ISO C++ mode, -std=c++17, does not contract; Clang contracts within one expression where FMA is
+// enabled, so each term and each addition is a call of its own: metric.hpp's term and accumulate.)
 #pragma once
 
 #include <algorithm>

@@ -6,8 +6,9 @@
 // them with median splits), in all about 4 + 5 bytes a point besides the copy for float at the
 // default leaf size. memory_bytes() gives the exact figure.
 //
-// Exactness: every distance is computed by internal_distance() (metric.hpp) in one fixed order, so
-// results can be checked bit for bit against brute_force_knn(). Cells are pruned only when their
+// Exactness: every distance is computed as internal_distance() (metric.hpp) computes it, in one fixed
+// order (float L2 leaf scans of 8 to 24 axes by an SSE2 kernel with the same additions,
+// detail/fixed_distance.hpp), so results can be checked bit for bit against brute_force_knn(). Cells are pruned only when their
 // lower bound, shrunk by a margin that covers rounding in the incremental bound, exceeds the current
 // k-th distance, so rounding never loses a neighbour. The k-NN of q are the first k points in the
 // order (internal distance, index): ties, at the k-th place too, go to the smaller index. For L2 the
@@ -478,11 +479,14 @@ class PointTree {
         case 8: return scan_leaf_as<8>(leaf, ctx, results);
         default: break;
       }
-      if (std::is_same_v<T, float> && dim_ <= 24) return scan_leaf_wide(leaf, ctx, results);
+      if constexpr (std::is_same_v<T, float>)
+        if (dim_ > distance_lanes && dim_ <= wide_scan_dims) return scan_leaf_wide(leaf, ctx, results);
     }
     scan_leaf_as<Dim>(leaf, ctx, results);
   }
 
+  // The most axes of a float tree whose leaf scan has a compile-time dimension (scan_leaf_wide).
+  static constexpr std::size_t wide_scan_dims = 24;
   // 9 to 24 axes (descriptors: MFCC 13 and 20, 16-bin histograms), out of the search's line: in the
   // same switch they grew the search, and the 3-D queries ran 0.6% more instructions (armadillo 1-NN,
   // callgrind); the call a leaf costs the 13-D queries 6% more instructions and about 3% of their time.
@@ -514,7 +518,7 @@ class PointTree {
   // 13-D point where internal_distance took 66; mfcc13 1-NN batches 1.25x the queries a second).
   template <int D>
   T leaf_distance(const T* q, const T* p, std::size_t d) const {
-    if constexpr (D >= 8 && std::is_same_v<T, float> && std::is_same_v<Metric, L2>)
+    if constexpr (D >= static_cast<int>(distance_lanes) && std::is_same_v<T, float> && std::is_same_v<Metric, L2>)
       return detail::l2_distance_fixed<static_cast<std::size_t>(D)>(q, p);
     else
       return internal_distance(metric_, q, p, d);

@@ -6,8 +6,9 @@
 // combines them pairwise ((j, j+4), then (j, j+2), then (0, 1)) and adds the remaining axes one by
 // one. Left to the compiler, that order at 13 axes came to about 66 instructions a point in the
 // leaf scan (callgrind, mfcc13 1-NN); 34 with this kernel. Here the squares are
-// computed four at a time, the lanes combined as above, and the remaining squares, still computed
-// four at a time, added one after the other in axis order: the same additions on the same values.
+// computed four at a time, the lanes combined as above, and the remaining squares (four at a time
+// while four remain, then one by one) added one after the other in axis order: the same additions on
+// the same values.
 // (A square is never -0, so starting a lane from its first square instead of 0 + square changes no
 // bit.) Every load lies within the D values of a row.
 #pragma once
@@ -62,7 +63,9 @@ template <std::size_t D>
   std::size_t i = blocks * distance_lanes;
   for (; i + 4 <= D; i += 4) total = add_in_order(total, squares4(a + i, b + i));
   float sum = _mm_cvtss_f32(total);
-  for (; i < D; ++i) sum += (a[i] - b[i]) * (a[i] - b[i]);
+  // term and accumulate as separate calls, as in internal_distance: one expression a * b + c could be
+  // contracted into a fused multiply-add (clang's default -ffp-contract=on where FMA is enabled).
+  for (; i < D; ++i) sum = L2::accumulate(sum, L2::term(a[i] - b[i]));
   return sum;
 #else
   return internal_distance<L2>(a, b, D);
