@@ -672,6 +672,7 @@ TEST_CASE("exact: trees with a compile-time dimension answer knn bit for bit lik
   // Float L2 from 8 axes on: the SSE2 leaf distance of a compile-time dimension (fixed_distance.hpp).
   knn_matches_brute_force<float, kdspace::L2, 13>({shape, 1000, 13, 9004}, fewer_split_rules(), 10, bad);
   knn_matches_brute_force<float, kdspace::L2, 20>({shape, 600, 20, 9005}, fewer_split_rules(), 10, bad);
+  knn_matches_brute_force<float, kdspace::L2, 128>({shape, 300, 128, 9006}, fewer_split_rules(), 10, bad);
   bad.done();
 }
 

@@ -60,7 +60,7 @@ inline void widen_by_row(const T* x, std::size_t dim, T* lo, T* hi) {
     }
   }
 #endif
-  for (; a < dim; ++a) {
+  for (std::size_t rest = dim - a; rest > 0; --rest, ++a) {
     lo[a] = std::min(lo[a], x[a]);
     hi[a] = std::max(hi[a], x[a]);
   }
