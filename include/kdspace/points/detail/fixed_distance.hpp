@@ -32,6 +32,15 @@ namespace sse2_fixed {
   return _mm_mul_ps(d, d);
 }
 
+// The 8 lanes of squares or sums (low: lanes 0-3, high: 4-7) combined as internal_distance()
+// combines them: (j, j+4), then (j, j+2), then (0, 1); the result in lane 0 (row_distances.hpp's
+// combine uses it too).
+[[gnu::always_inline]] inline __m128 combine_lanes(__m128 low, __m128 high) {
+  const __m128 four = _mm_add_ps(low, high);                       // lane j + lane j+4, j < 4
+  const __m128 two = _mm_add_ps(four, _mm_movehl_ps(four, four));  // (0+2), (1+3)
+  return _mm_add_ss(two, _mm_shuffle_ps(two, two, 1));
+}
+
 // total + v[0] + v[1] + v[2] + v[3], added in that order.
 [[gnu::always_inline]] inline __m128 add_in_order(__m128 total, __m128 v) {
   total = _mm_add_ss(total, v);
@@ -56,9 +65,7 @@ template <std::size_t D>
       low = _mm_add_ps(low, squares4(a + 8 * block, b + 8 * block));
       high = _mm_add_ps(high, squares4(a + 8 * block + 4, b + 8 * block + 4));
     }
-    const __m128 four = _mm_add_ps(low, high);                       // lane j + lane j+4, j < 4
-    const __m128 two = _mm_add_ps(four, _mm_movehl_ps(four, four));  // (0+2), (1+3)
-    total = _mm_add_ss(two, _mm_shuffle_ps(two, two, 1));
+    total = combine_lanes(low, high);
   }
   std::size_t i = blocks * distance_lanes;
   for (; i + 4 <= D; i += 4) total = add_in_order(total, squares4(a + i, b + i));

@@ -16,6 +16,7 @@
 #include <type_traits>
 
 #include "kdspace/metric.hpp"
+#include "kdspace/points/detail/fixed_distance.hpp"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -74,12 +75,8 @@ inline void load_block(const std::uint8_t* p, __m128& low, __m128& high) {
   high = _mm_cvtepi32_ps(_mm_unpackhi_epi16(words, zero));
 }
 
-// The 8 lanes combined as internal_distance() combines them: (j, j+4), then (j, j+2), then (0, 1).
-inline float combine(__m128 low, __m128 high) {
-  const __m128 four = _mm_add_ps(low, high);                      // lane j + lane j+4, j < 4
-  const __m128 two = _mm_add_ps(four, _mm_movehl_ps(four, four));  // lanes 0, 1: (0+2), (1+3)
-  return _mm_cvtss_f32(_mm_add_ss(two, _mm_shuffle_ps(two, two, 1)));
-}
+// The 8 lanes combined as internal_distance() combines them (fixed_distance.hpp).
+inline float combine(__m128 low, __m128 high) { return _mm_cvtss_f32(sse2_fixed::combine_lanes(low, high)); }
 
 template <std::size_t R, class U>
 void l2_distances_or_more(const float* a, const U* const* b, std::size_t dim, float limit, float* out) {
