@@ -40,7 +40,6 @@ class TempDir : public kdspace_test::ScratchDir {
   TempDir() : ScratchDir("kdspace-index-test-", true) {}
 };
 
-
 template <class Tree>
 void require_same_nodes(const Tree& a, const Tree& b) {
   REQUIRE(a.node_count() == b.node_count());
@@ -196,9 +195,10 @@ TEST_CASE("index: metrics, compile-time dimensions and the blocked scan survive 
     const std::vector<double> wider(points.begin(), points.end());
     const std::vector<double> wider_queries(queries.begin(), queries.end());
     const PointTree<double, kdspace::Dynamic, kdspace::Minkowski> built(wider.data(), n, 3, {},
-                                                                       kdspace::Minkowski(3.5));
+                                                                        kdspace::Minkowski(3.5));
     io::save(tmp.file("minkowski.kdx"), built);
-    const auto loaded = io::load_point_tree<double, kdspace::Dynamic, kdspace::Minkowski>(tmp.file("minkowski.kdx"));
+    const auto loaded =
+        io::load_point_tree<double, kdspace::Dynamic, kdspace::Minkowski>(tmp.file("minkowski.kdx"));
     REQUIRE(loaded.metric().p == 3.5);
     require_same_answers(loaded, built, wider_queries);
   }
@@ -502,6 +502,119 @@ TEST_CASE("index: the check's wide kernels decide as the baseline loops do", "[i
   }
 #endif
   SUCCEED("without AVX2 and BMI2 only the baseline loops run");
+}
+
+TEST_CASE("index: the 3-D float check in one AVX2 loop decides as the baseline walk does", "[index]") {
+  // Parts of 3-D float trees (uniform and duplicate-heavy points, so leaves of identical points too;
+  // leaves of up to 3 and up to 24 points) with a node's field, a coordinate or an order value
+  // changed at random, as a forged file could hold them: checked with the wide kernels and with the
+  // baseline loops alone, the same verdict and the same message, on one thread and on two.
+  using Node = kdspace::detail::PointNode<float>;
+  struct Case {
+    Shape shape;
+    std::size_t n, leaf_size;
+    unsigned threads;
+    int trials;
+  };
+  std::mt19937 rng(23);
+  for (const Case& c : {Case{Shape::uniform, 3000, 24, 1, 1500}, Case{Shape::duplicates, 3000, 24, 1, 1500},
+                        Case{Shape::uniform, 2000, 3, 1, 1000}, Case{Shape::clustered, 140000, 24, 2, 60}}) {
+    CAPTURE(kdspace_test::name(c.shape), c.n, c.leaf_size, c.threads);
+    const auto rows = kdspace_test::make_points<float>(c.shape, c.n, 3, 5);
+    kdspace::BuildParams params;
+    params.leaf_size = c.leaf_size;
+    const PointTree<float> tree(rows.data(), c.n, 3, params);
+    const auto parts = tree.parts();
+    std::vector<float> points(parts.points.begin(), parts.points.end());
+    std::vector<std::uint32_t> order(parts.order.begin(), parts.order.end());
+    std::vector<Node> nodes(parts.nodes.begin(), parts.nodes.end());
+    const auto verdict = [&](bool wide) {
+      kdspace::detail::PointTreeParts<float> p{
+          3,
+          parts.params,
+          kdspace::detail::Storage<float>::borrow(points.data(), points.size()),
+          kdspace::detail::Storage<std::uint32_t>::borrow(order.data(), order.size()),
+          kdspace::detail::Storage<Node>::borrow(nodes.data(), nodes.size()),
+          parts.root_lo,
+          parts.root_hi,
+          nullptr};
+      p.check_threads = c.threads;
+      p.wide_kernels = wide;
+      try {
+        kdspace::detail::check_point_tree(p);
+        return std::string();
+      } catch (const kdspace::Error& e) {
+        return std::string(e.what());
+      }
+    };
+    REQUIRE(verdict(true) == "");
+    REQUIRE(verdict(false) == "");
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    int refused = 0;
+    for (int trial = 0; trial < c.trials; ++trial) {
+      const auto pick = [&](std::size_t size) {
+        return std::uniform_int_distribution<std::size_t>(0, size - 1)(rng);
+      };
+      const auto nudge = [&](float v) {  // a value near v, or one far off
+        switch (rng() % 6) {
+          case 0:
+            return nan;
+          case 1:
+            return rng() % 2 ? inf : -inf;
+          case 2:
+            return std::nextafter(v, inf);
+          case 3:
+            return std::nextafter(v, -inf);
+          default:
+            return v + std::uniform_real_distribution<float>(-0.05f, 0.05f)(rng);
+        }
+      };
+      const std::vector<float> kept_points = points;
+      const std::vector<std::uint32_t> kept_order = order;
+      const std::vector<Node> kept_nodes = nodes;
+      const int changes = 1 + trial % 2;
+      for (int k = 0; k < changes; ++k) {
+        Node& node = nodes[pick(nodes.size())];
+        switch (rng() % 8) {
+          case 0:
+            node.left_max = nudge(node.left_max);
+            break;
+          case 1:
+            node.right_min = nudge(node.right_min);
+            break;
+          case 2:
+            std::swap(node.left_max, node.right_min);
+            break;
+          case 3:
+            node.link = static_cast<std::uint32_t>(node.link + (rng() % 5) - 2);
+            break;
+          case 4:
+            node.info ^= std::uint32_t{1} << (rng() % 32);
+            break;
+          case 5:
+            node.info = static_cast<std::uint32_t>(rng() % 4);
+            break;
+          case 6: {
+            float& v = points[pick(points.size())];
+            v = nudge(v);
+            break;
+          }
+          default:
+            order[pick(order.size())] =
+                rng() % 8 ? order[pick(order.size())] : static_cast<std::uint32_t>(c.n);
+        }
+      }
+      CAPTURE(trial);
+      const std::string wide = verdict(true);
+      REQUIRE(wide == verdict(false));
+      refused += wide.empty() ? 0 : 1;
+      points = kept_points;
+      order = kept_order;
+      nodes = kept_nodes;
+    }
+    CHECK(refused > c.trials / 4);
+    CHECK(refused < c.trials);  // some changes leave a sound tree
+  }
 }
 
 TEST_CASE("index: a full disk mid-save leaves the old file intact, and no temporary file",

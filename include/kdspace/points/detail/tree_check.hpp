@@ -33,6 +33,7 @@
 #include "kdspace/points/detail/node.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/tree_check_kernels.hpp"
+#include "kdspace/points/detail/tree_check_walk3.hpp"
 #include "kdspace/points/params.hpp"
 
 namespace kdspace::detail {
@@ -56,6 +57,7 @@ struct PointTreeParts {
   std::shared_ptr<const void> backing;
   CheckCompanion* companion = nullptr;  ///< work the check runs beside (not owned; used while it runs)
   unsigned check_threads = 2;           ///< 1: the check runs on the calling thread alone
+  bool wide_kernels = true;  ///< false: the baseline loops alone, even where AVX2 runs (tests compare them)
 };
 
 /// What the check works out on the way: the figures a PointTree keeps besides its arrays.
@@ -72,7 +74,7 @@ template <class T>
 class TreeChecker {
  public:
   explicit TreeChecker(const PointTreeParts<T>& p)
-      : p_(p), n_(p.order.size()), dim_(p.dim), kernels_(tree_check_kernels()) {}
+      : p_(p), n_(p.order.size()), dim_(p.dim), kernels_(p.wide_kernels && tree_check_kernels()) {}
 
   TreeShape run() {
     if (dim_ == 0) fail("dimension 0");
@@ -326,6 +328,11 @@ class TreeChecker {
   // node in storage order (depth first): a loop over the nodes with a stack of the inner nodes above
   // the one visited, instead of a call a node.
   void visit(Walk& walk, std::size_t depth) {
+#if defined(KDSPACE_AVX2_DISPATCH)
+    if constexpr (std::is_same_v<T, float>)
+      if (dim_ == 3 && kernels_ && visit3(walk, depth)) return;
+        // Else a problem: the walk below starts the subtree over and names it.
+#endif
     const PointNode<T>* nodes = p_.nodes.data();
     const std::size_t node_count = p_.nodes.size();
     Frame* stack = walk.stack.data();
@@ -367,6 +374,37 @@ class TreeChecker {
       }
     }
   }
+
+#if defined(KDSPACE_AVX2_DISPATCH)
+  // visit() for a 3-D float tree in one AVX2 loop (tree_check_walk3.hpp): true, with walk advanced
+  // as visit() advances it, or false where visit() would throw (walk then unchanged).
+  bool visit3(Walk& walk, std::size_t depth) {
+    Walk3 w;
+    w.nodes = p_.nodes.data();
+    w.node_count = p_.nodes.size();
+    w.points = p_.points.data();
+    w.order = p_.order.data();
+    w.n = n_;
+    w.companion = walk.companion;
+    w.walk_id = walk.id;
+    w.rows_array = check_rows;
+    w.nodes_array = check_nodes;
+    w.next_node = walk.next_node;
+    w.next_point = walk.next_point;
+    w.rows_ready = walk.rows_ready;
+    w.nodes_ready = walk.nodes_ready;
+    w.depth = walk.shape.depth;
+    w.leaves = walk.shape.leaves;
+    if (!walk3_avx2<max_tree_depth>(w, depth, walk.lo.data(), walk.hi.data())) return false;
+    walk.next_node = w.next_node;
+    walk.next_point = w.next_point;
+    walk.rows_ready = w.rows_ready;
+    walk.nodes_ready = w.nodes_ready;
+    walk.shape.depth = w.depth;
+    walk.shape.leaves = w.leaves;
+    return true;
+  }
+#endif
 
   void visit_leaf(Walk& walk, std::size_t id, const PointNode<T>& leaf, std::size_t depth) {
     const std::size_t first = leaf.first(), count = leaf.count();

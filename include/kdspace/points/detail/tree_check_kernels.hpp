@@ -1,5 +1,6 @@
 // The two inner loops of a loaded point tree's check (tree_check.hpp) compiled for wider instruction
-// sets, chosen at run time: 3-D float points against their cell eight at a time with AVX2, and the
+// sets, chosen at run time: 3-D float points against their cell eight at a time with AVX2 (also the
+// leaf test of the AVX2 walk, tree_check_walk3.hpp), and the
 // point order's bits set with BMI2's shifts after an AVX2 range check of the values (no clamp a
 // value): about a third fewer instructions a value. They decide exactly what the baseline loops
 // decide; the tests run both (KDSPACE_NO_AVX2, ctest entry `baseline_without_avx2`).
@@ -51,27 +52,53 @@ __attribute__((target("avx2"), always_inline)) inline __m256 within8(__m256 low,
   return _mm256_and_ps(_mm256_cmp_ps(low, p, _CMP_LE_OQ), _mm256_cmp_ps(p, high, _CMP_LE_OQ));
 }
 
-/// Whether lo <= p <= hi for every 3-D float point p of rows [0, count), count >= 8; lo and hi hold
-/// four floats (the cell's three, then any). Eight points are 24 floats, three 8-float loads whose
-/// lanes hold the axes x y z x y z x y, z x y z x y z x, y z x y z x y z; a leaf of 8k + r points
-/// ends with the eight points that end it (r of them checked a second time). A NaN fails.
+/// Lanes where the eight 3-D points at p lie in the cell whose lanes are put in the three orders of
+/// their floats (see below).
+__attribute__((target("avx2"), always_inline)) inline __m256 eight_points3_inside(const float* p, __m256 lo0,
+                                                                                  __m256 lo1, __m256 lo2,
+                                                                                  __m256 hi0, __m256 hi1,
+                                                                                  __m256 hi2) {
+  return _mm256_and_ps(
+      _mm256_and_ps(within8(lo0, _mm256_loadu_ps(p), hi0), within8(lo1, _mm256_loadu_ps(p + 8), hi1)),
+      within8(lo2, _mm256_loadu_ps(p + 16), hi2));
+}
+
+/// Whether lo <= p <= hi for every 3-D point p of rows [0, count) (false where a coordinate is NaN);
+/// lo and hi hold x y z in their first three lanes. Eight points are 24 floats, three 8-float loads
+/// whose lanes hold the axes x y z x y z x y, z x y z x y z x, y z x y z x y z: the cell's lanes are
+/// put in those orders by one permute each. A leaf of 8k + r points (k >= 1) ends with the eight
+/// points that end it (r of them tested a second time); one of fewer than eight point by point.
+__attribute__((target("avx2"), always_inline)) inline bool points3_in_cell_avx2(const float* rows,
+                                                                                std::size_t count, __m128 lo,
+                                                                                __m128 hi) {
+  if (count >= 8) {
+    const __m256i order0 = _mm256_setr_epi32(0, 1, 2, 0, 1, 2, 0, 1);
+    const __m256i order1 = _mm256_setr_epi32(2, 0, 1, 2, 0, 1, 2, 0);
+    const __m256i order2 = _mm256_setr_epi32(1, 2, 0, 1, 2, 0, 1, 2);
+    const __m256 low = _mm256_castps128_ps256(lo), high = _mm256_castps128_ps256(hi);
+    const __m256 lo0 = _mm256_permutevar8x32_ps(low, order0), hi0 = _mm256_permutevar8x32_ps(high, order0);
+    const __m256 lo1 = _mm256_permutevar8x32_ps(low, order1), hi1 = _mm256_permutevar8x32_ps(high, order1);
+    const __m256 lo2 = _mm256_permutevar8x32_ps(low, order2), hi2 = _mm256_permutevar8x32_ps(high, order2);
+    __m256 ok = eight_points3_inside(rows + 3 * (count - 8), lo0, lo1, lo2, hi0, hi1, hi2);
+    for (std::size_t i = 0; i + 8 < count; i += 8)
+      ok = _mm256_and_ps(ok, eight_points3_inside(rows + 3 * i, lo0, lo1, lo2, hi0, hi1, hi2));
+    return _mm256_movemask_ps(ok) == 255;
+  }
+  alignas(16) float low_lanes[4], high_lanes[4];
+  _mm_store_ps(low_lanes, lo);
+  _mm_store_ps(high_lanes, hi);
+  unsigned inside = 1;
+  for (std::size_t i = 0; i < count; ++i, rows += 3)
+    for (std::size_t a = 0; a < 3; ++a)
+      inside &=
+          static_cast<unsigned>(low_lanes[a] <= rows[a]) & static_cast<unsigned>(rows[a] <= high_lanes[a]);
+  return inside != 0;
+}
+
+/// The same for a cell of four floats in memory (x y z, then any).
 __attribute__((target("avx2"))) inline bool points3_inside_avx2(const float* rows, std::size_t count,
                                                                 const float* lo, const float* hi) {
-  // The three lane orders of four lanes, paired into eight.
-  const CellLanes3 low = cell_lanes3(lo), high = cell_lanes3(hi);
-  const __m128 l0 = low.order[0], l1 = low.order[1], l2 = low.order[2];
-  const __m128 h0 = high.order[0], h1 = high.order[1], h2 = high.order[2];
-  const __m256 lo0 = _mm256_set_m128(l1, l0), lo1 = _mm256_set_m128(l0, l2), lo2 = _mm256_set_m128(l2, l1);
-  const __m256 hi0 = _mm256_set_m128(h1, h0), hi1 = _mm256_set_m128(h0, h2), hi2 = _mm256_set_m128(h2, h1);
-  __m256 ok = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
-  for (std::size_t i = 0;; i += 8) {
-    const float* p = rows + 3 * (i + 8 <= count ? i : count - 8);
-    ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_and_ps(within8(lo0, _mm256_loadu_ps(p), hi0),
-                                                       within8(lo1, _mm256_loadu_ps(p + 8), hi1)),
-                                         within8(lo2, _mm256_loadu_ps(p + 16), hi2)));
-    if (i + 8 >= count) break;
-  }
-  return _mm256_movemask_ps(ok) == 255;
+  return points3_in_cell_avx2(rows, count, _mm_loadu_ps(lo), _mm_loadu_ps(hi));
 }
 
 /// Sets bit v of `bits` for each value v of values [0, count) and returns true, when every value is
