@@ -57,6 +57,20 @@ struct StackEntry {
   Real t_entry, t_exit;
 };
 
+/// A node's two words as one integer, and back: for selects between nodes without a branch.
+inline std::uint64_t node_bits(const BoxNode& node) {
+  std::uint64_t bits;
+  static_assert(sizeof(BoxNode) == sizeof bits, "BoxNode: two 32-bit words");
+  std::memcpy(&bits, &node, sizeof bits);
+  return bits;
+}
+inline BoxNode node_of_bits(std::uint64_t bits) {
+  BoxNode node;
+  node.word = static_cast<std::uint32_t>(bits);
+  node.info = static_cast<std::uint32_t>(bits >> 32);
+  return node;
+}
+
 void check_range(float t_min, float t_max) {
   if (!std::isfinite(t_min)) throw Error("t_min must be finite, got " + std::to_string(t_min));
   if (std::isnan(t_max)) throw Error("t_max must not be NaN");
@@ -157,67 +171,67 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
     std::uint32_t index = entry.node;
     t_entry = entry.t_entry;
     t_exit = entry.t_exit;
-    for (;;) {
+    BoxNode node = nodes_[index];
+    // Inner nodes: a step without a branch on the ray. Both children's nodes are read as soon as
+    // this node is known (the left is the next node, the right at right_child()), before t_split;
+    // which of them comes next, whether the far child is pushed and the new interval are selects.
+    // So no step is mispredicted and the next node's load is not behind t_split.
+    while (!node.is_leaf()) {
       ++stats.nodes_visited;
-      const BoxNode node = nodes_[index];
-      if (node.is_leaf()) {
-        const std::uint32_t count = node.count();
-        stats.boxes_tested += count;
-        const LeafBlock* blocks = blocks_.data() + node.first() / 4;
-        const std::uint32_t* ids = references_.data() + node.first();
-        for (std::uint32_t done = 0; done < count;
-             done += 4 * step_blocks, blocks += step_blocks, ids += 4 * step_blocks) {
-          // The lanes past count repeat the leaf's last box (checked when a tree is loaded), so they
-          // are not masked off: a repeated box gives the same hit, which changes nothing (equal t,
-          // equal index), and the mask cost a branch at every block (3.5% of the instructions of a
-          // random ray that hits).
-          unsigned lanes =
-              detail::leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best_bound);
-          while (lanes != 0) {
-            const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
-            lanes &= lanes - 1;
-            double t_near = t_min, t_far = best_t;
-            if (!exact) exact.emplace(ray);
-            if (!clip_to_box(detail::box_in_lane(blocks[lane / 4], lane % 4), *exact, t_near, t_far))
-              continue;
-            const auto box = static_cast<std::int32_t>(ids[lane]);
-            if constexpr (AnyHit) {
-              return Hit{box, detail::to_float_t(t_near)};
-            } else {
-              if (t_near < best_t || best_box == Hit::none || box < best_box) {
-                best_t = t_near;
-                best_box = box;
-                best_bound = round_up<Real>(best_t);
-              }
+      const int axis = node.axis();
+      const std::uint32_t right = node.right_child();
+      const std::uint64_t left_bits = node_bits(nodes_[index + 1]), right_bits = node_bits(nodes_[right]);
+      const std::uint32_t towards_negative = (negative_axes >> axis) & 1u;
+      std::uint32_t near, far;
+      detail::order_children(index, right, towards_negative, near, far);
+      const std::uint64_t node_differ = (left_bits ^ right_bits) & (0ull - towards_negative);
+      const std::uint64_t near_bits = left_bits ^ node_differ, far_bits = right_bits ^ node_differ;
+      const Real t_split = (static_cast<Real>(node.split()) - r.origin[axis]) * r.inverse[axis];
+      // The ray crossed the plane before entering the cell: the far child alone, over the same
+      // interval. Else the near child over [t_entry, min(t_split, t_exit)], and the far child pushed
+      // unless the ray leaves the cell before the plane. A NaN t_split (the ray in the plane) is
+      // neither: both children over the same interval.
+      const std::uint32_t far_only = t_split < detail::widen_down(t_entry);
+      const std::uint32_t push = (far_only ^ 1u) & static_cast<std::uint32_t>(!(t_split > detail::widen_up(t_exit)));
+      stack[top] = StackEntry<Real>{far, t_split > t_entry ? t_split : t_entry, t_exit};
+      top += push;
+      const std::uint32_t take_far = 0u - far_only;
+      index = near ^ ((near ^ far) & take_far);
+      node = node_of_bits(near_bits ^ ((near_bits ^ far_bits) & (0ull - far_only)));
+      const Real near_exit = t_split < t_exit ? t_split : t_exit;
+      t_exit = far_only ? t_exit : near_exit;
+    }
+    ++stats.nodes_visited;
+    {
+      const std::uint32_t count = node.count();
+      stats.boxes_tested += count;
+      const LeafBlock* blocks = blocks_.data() + node.first() / 4;
+      const std::uint32_t* ids = references_.data() + node.first();
+      for (std::uint32_t done = 0; done < count;
+           done += 4 * step_blocks, blocks += step_blocks, ids += 4 * step_blocks) {
+        // The lanes past count repeat the leaf's last box (checked when a tree is loaded), so they
+        // are not masked off: a repeated box gives the same hit, which changes nothing (equal t,
+        // equal index), and the mask cost a branch at every block (3.5% of the instructions of a
+        // random ray that hits).
+        unsigned lanes =
+            detail::leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best_bound);
+        while (lanes != 0) {
+          const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
+          lanes &= lanes - 1;
+          double t_near = t_min, t_far = best_t;
+          if (!exact) exact.emplace(ray);
+          if (!clip_to_box(detail::box_in_lane(blocks[lane / 4], lane % 4), *exact, t_near, t_far)) continue;
+          const auto box = static_cast<std::int32_t>(ids[lane]);
+          if constexpr (AnyHit) {
+            return Hit{box, detail::to_float_t(t_near)};
+          } else {
+            if (t_near < best_t || best_box == Hit::none || box < best_box) {
+              best_t = t_near;
+              best_box = box;
+              best_bound = round_up<Real>(best_t);
             }
           }
         }
-        break;
-      }
-      // The ray crosses the plane at t_split. On a parallel axis the reciprocal is +-inf: t_split is
-      // +inf (the ray stays on the near side), -inf (on the far side) or NaN (it lies in the plane:
-      // both children over the same interval), so such rays need no case of their own. The near child
-      // holds the ray for t < t_split: the left one (the next node) when the ray moves towards +axis.
-      // Which child is near is a select (order_children), and so is whether the far child is pushed
-      // (below); whether the ray goes to the far child alone stays a branch: a predicted branch lets
-      // the processor fetch the next node before this one's t_split is known (measured: a fully
-      // branch-free step was 25-40% slower on coherent rays and no faster on random ones).
-      const int axis = node.axis();
-      std::uint32_t near, far;
-      detail::order_children(index, node.right_child(), (negative_axes >> axis) & 1u, near, far);
-      const Real t_split = (static_cast<Real>(node.split()) - r.origin[axis]) * r.inverse[axis];
-      if (t_split < detail::widen_down(t_entry)) {
-        index = far;  // the ray crossed the plane before entering the cell
-      } else {
-        // The near child next; the far one too unless the ray leaves the cell before reaching the
-        // plane. Its entry is written either way and kept by counting it, not by a branch: whether
-        // a random ray reaches the plane is unpredictable. Max and min written so that a NaN
-        // t_split leaves the interval as it is (and pushes the far child); in the near-only case
-        // t_split > t_exit, so the new t_exit is the old one.
-        stack[top] = StackEntry<Real>{far, t_split > t_entry ? t_split : t_entry, t_exit};
-        top += !(t_split > detail::widen_up(t_exit));
-        index = near;
-        t_exit = t_split < t_exit ? t_split : t_exit;
       }
     }
   }
