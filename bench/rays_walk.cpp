@@ -32,7 +32,9 @@ double cpu_seconds() {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: rays_walk MESH_FILE|uniform|clustered [--boxes N] [--rays M] [--any-hit] [--reps R]\n");
+    std::fprintf(
+        stderr,
+        "usage: rays_walk MESH_FILE|uniform|clustered [--boxes N] [--rays M] [--any-hit] [--reps R]\n");
     return 2;
   }
   const std::string scene = argv[1];
@@ -40,19 +42,26 @@ int main(int argc, char** argv) {
   bool any = false;
   for (int i = 2; i < argc; ++i) {
     const std::string arg = argv[i];
-    if (arg == "--boxes" && i + 1 < argc) n = std::strtoull(argv[++i], nullptr, 10);
-    else if (arg == "--rays" && i + 1 < argc) m = std::strtoull(argv[++i], nullptr, 10);
-    else if (arg == "--reps" && i + 1 < argc) reps = std::strtoull(argv[++i], nullptr, 10);
-    else if (arg == "--any-hit") any = true;
+    if (arg == "--boxes" && i + 1 < argc)
+      n = std::strtoull(argv[++i], nullptr, 10);
+    else if (arg == "--rays" && i + 1 < argc)
+      m = std::strtoull(argv[++i], nullptr, 10);
+    else if (arg == "--reps" && i + 1 < argc)
+      reps = std::strtoull(argv[++i], nullptr, 10);
+    else if (arg == "--any-hit")
+      any = true;
     else {
       std::fprintf(stderr, "rays_walk: unknown argument %s\n", arg.c_str());
       return 2;
     }
   }
   std::vector<Box3f> boxes;
-  if (scene == "uniform") boxes = generate_boxes(n, SceneKind::uniform, 1);
-  else if (scene == "clustered") boxes = generate_boxes(n, SceneKind::clustered, 1);
-  else boxes = bench::triangle_boxes(bench::read_mesh(scene));
+  if (scene == "uniform")
+    boxes = generate_boxes(n, SceneKind::uniform, 1);
+  else if (scene == "clustered")
+    boxes = generate_boxes(n, SceneKind::clustered, 1);
+  else
+    boxes = bench::triangle_boxes(bench::read_mesh(scene));
   const BoxTree tree(boxes);
   const std::vector<Ray> rays = random_rays(m, tree.bounds(), 2);
   double best = 1e300;
@@ -61,14 +70,16 @@ int main(int argc, char** argv) {
   for (std::size_t rep = 0; rep < reps; ++rep) {
     RayStats local;
     const double start = cpu_seconds();
-    const std::vector<Hit> hits = any ? tree.any_hit_batch(rays, 1, &local) : tree.closest_hit_batch(rays, 1, &local);
+    const std::vector<Hit> hits =
+        any ? tree.any_hit_batch(rays, 1, &local) : tree.closest_hit_batch(rays, 1, &local);
     best = std::min(best, cpu_seconds() - start);
     hit_count = 0;
     for (const Hit& h : hits) hit_count += h.hit() ? 1 : 0;
     stats = local;
   }
-  std::printf("%zu boxes, %zu rays, %zu hit; %.2f nodes, %.2f boxes a ray; best %.1f ns a ray\n", boxes.size(),
-              rays.size(), hit_count, static_cast<double>(stats.nodes_visited) / static_cast<double>(m),
-              static_cast<double>(stats.boxes_tested) / static_cast<double>(m), 1e9 * best / static_cast<double>(m));
+  std::printf(
+      "%zu boxes, %zu rays, %zu hit; %.2f nodes, %.2f boxes a ray; best %.1f ns a ray\n", boxes.size(),
+      rays.size(), hit_count, static_cast<double>(stats.nodes_visited) / static_cast<double>(m),
+      static_cast<double>(stats.boxes_tested) / static_cast<double>(m), 1e9 * best / static_cast<double>(m));
   return 0;
 }

@@ -15,12 +15,14 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <optional>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "../lib/rays/descent.hpp"
 #include "../lib/rays/traversal_ray.hpp"
 #include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/error.hpp"
@@ -820,5 +822,75 @@ TEST_CASE("rays: the eight-box leaf filter lets through exactly the lanes of two
     }
   }
   CHECK(passed > 0);
+#endif
+}
+
+TEST_CASE("rays: the vector-register descent makes the scalar descent's choices, bit for bit", "[rays]") {
+#if defined(KDSPACE_AVX2_DISPATCH)
+  if (!kdspace::detail::avx2_dispatch()) return;  // no AVX2 (or KDSPACE_NO_AVX2): never used
+  // Every ray walks the whole tree (every pushed far child popped, no cut by a hit) once with each
+  // descent: the leaves reached, the entries pushed (node, t_entry, t_exit bits) and the nodes
+  // counted must be the same. Rays in split planes (integer scenes, lattice rays), with +-0, tiny
+  // and negative direction components, from inside and outside.
+  using kdspace::detail::StackEntry;
+  struct Walk {
+    std::vector<std::uint64_t> leaves;
+    std::vector<std::uint32_t> pushed;  // node, then the bits of t_entry and t_exit
+    std::uint64_t visited = 0;
+  };
+  const auto bits_of = [](float f) {
+    std::uint32_t b;
+    std::memcpy(&b, &f, sizeof b);
+    return b;
+  };
+  Rng rng(31);
+  const std::vector<std::vector<Box3f>> scenes{
+      kdspace::generate_boxes(3000, kdspace::SceneKind::clustered, 31), integer_boxes(600, rng),
+      flat_boxes(600, rng), mixed_scale_boxes(600, rng), overlapping_boxes(300, rng)};
+  std::size_t leaves = 0;
+  for (std::size_t s = 0; s < scenes.size(); ++s) {
+    INFO("scene " << s);
+    const BoxTree tree(scenes[s]);
+    const Box3f bounds = tree.bounds();
+    std::vector<Ray> rays = random_rays(600, bounds, rng);
+    const std::vector<Ray> lattice = lattice_rays(600, -1, 13, rng);
+    rays.insert(rays.end(), lattice.begin(), lattice.end());
+    for (std::size_t k = 0; k < 600; k += 3) rays[k].direction[k % 3] = k % 2 ? 0.0f : -0.0f;
+    for (std::size_t k = 1; k < 600; k += 7) rays[k].direction[k % 3] = -1e-20f;
+    for (const Ray& ray : rays) {
+      const kdspace::detail::TraversalRay<float> r(ray);
+      float t_entry = 0, t_exit = std::numeric_limits<float>::infinity();
+      if (!kdspace::detail::clip_widened(bounds, r, t_entry, t_exit)) continue;
+      const kdspace::detail::DescentRay d = kdspace::detail::descent_ray(r);
+      Walk walks[2];
+      for (int form = 0; form < 2; ++form) {
+        Walk& walk = walks[form];
+        std::vector<StackEntry<float>> stack(kdspace::max_box_tree_depth + 2);
+        std::size_t top = 0;
+        stack[top++] = StackEntry<float>{0, t_entry, t_exit};
+        while (top > 0) {
+          const StackEntry<float> entry = stack[--top];
+          const std::size_t before = top;
+          const kdspace::BoxNode leaf =
+              form == 0 ? kdspace::detail::descend(tree.nodes().data(), entry.node, entry.t_entry,
+                                                   entry.t_exit, r, stack.data(), top, walk.visited)
+                        : kdspace::detail::descend_avx(tree.nodes().data(), entry.node, entry.t_entry,
+                                                       entry.t_exit, r, d, stack.data(), top, walk.visited);
+          walk.leaves.push_back(kdspace::detail::node_bits(leaf));
+          for (std::size_t i = before; i < top; ++i) {
+            walk.pushed.push_back(stack[i].node);
+            walk.pushed.push_back(bits_of(stack[i].t_entry));
+            walk.pushed.push_back(bits_of(stack[i].t_exit));
+          }
+        }
+      }
+      INFO(describe(ray));
+      REQUIRE(walks[1].leaves == walks[0].leaves);
+      REQUIRE(walks[1].pushed == walks[0].pushed);
+      REQUIRE(walks[1].visited == walks[0].visited);
+      leaves += walks[0].leaves.size();
+    }
+  }
+  CHECK(leaves > 0);
 #endif
 }

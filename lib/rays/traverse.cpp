@@ -37,6 +37,7 @@
 #include <utility>
 #include <vector>
 
+#include "descent.hpp"
 #include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/parallel.hpp"
@@ -50,26 +51,7 @@ namespace {
 using detail::clip_to_box;
 using detail::PreparedRay;
 
-/// A pending far child and the ray's interval in its cell: 12 bytes in float.
-template <class Real>
-struct StackEntry {
-  std::uint32_t node;
-  Real t_entry, t_exit;
-};
-
-/// A node's two words as one integer, and back: for selects between nodes without a branch.
-inline std::uint64_t node_bits(const BoxNode& node) {
-  std::uint64_t bits;
-  static_assert(sizeof(BoxNode) == sizeof bits, "BoxNode: two 32-bit words");
-  std::memcpy(&bits, &node, sizeof bits);
-  return bits;
-}
-inline BoxNode node_of_bits(std::uint64_t bits) {
-  BoxNode node;
-  node.word = static_cast<std::uint32_t>(bits);
-  node.info = static_cast<std::uint32_t>(bits >> 32);
-  return node;
-}
+using detail::StackEntry;
 
 void check_range(float t_min, float t_max) {
   if (!std::isfinite(t_min)) throw Error("t_min must be finite, got " + std::to_string(t_min));
@@ -159,8 +141,10 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
   std::int32_t best_box = Hit::none;
   Real best_bound = static_cast<Real>(t_max);  // best_t rounded up to Real
   const Real t_low = static_cast<Real>(t_min);
-  // Bit a: the ray runs towards -a (tested in a register, not loaded, at every inner node).
-  const std::uint32_t negative_axes = r.negative[0] | r.negative[1] << 1 | r.negative[2] << 2;
+#if defined(KDSPACE_AVX2_DISPATCH)
+  detail::DescentRay descent{};
+  if constexpr (Wide) descent = detail::descent_ray(r);
+#endif
   std::array<StackEntry<Real>, max_box_tree_depth + 2> stack;
   std::size_t top = 0;
   stack[top++] = StackEntry<Real>{0, t_entry, t_exit};
@@ -168,40 +152,17 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
   while (top > 0) {
     const StackEntry<Real> entry = stack[--top];
     if (detail::widen_down(entry.t_entry) > best_bound) continue;  // every hit in it is farther
-    std::uint32_t index = entry.node;
-    t_entry = entry.t_entry;
-    t_exit = entry.t_exit;
-    BoxNode node = nodes_[index];
-    // Inner nodes: a step without a branch on the ray. Both children's nodes are read as soon as
-    // this node is known (the left is the next node, the right at right_child()), before t_split;
-    // which of them comes next, whether the far child is pushed and the new interval are selects.
-    // So no step is mispredicted and the next node's load is not behind t_split.
-    while (!node.is_leaf()) {
-      ++stats.nodes_visited;
-      const int axis = node.axis();
-      const std::uint32_t right = node.right_child();
-      const std::uint64_t left_bits = node_bits(nodes_[index + 1]), right_bits = node_bits(nodes_[right]);
-      const std::uint32_t towards_negative = (negative_axes >> axis) & 1u;
-      std::uint32_t near, far;
-      detail::order_children(index, right, towards_negative, near, far);
-      const std::uint64_t node_differ = (left_bits ^ right_bits) & (0ull - towards_negative);
-      const std::uint64_t near_bits = left_bits ^ node_differ, far_bits = right_bits ^ node_differ;
-      const Real t_split = (static_cast<Real>(node.split()) - r.origin[axis]) * r.inverse[axis];
-      // The ray crossed the plane before entering the cell: the far child alone, over the same
-      // interval. Else the near child over [t_entry, min(t_split, t_exit)], and the far child pushed
-      // unless the ray leaves the cell before the plane. A NaN t_split (the ray in the plane) is
-      // neither: both children over the same interval.
-      const std::uint32_t far_only = t_split < detail::widen_down(t_entry);
-      const std::uint32_t push = (far_only ^ 1u) & static_cast<std::uint32_t>(!(t_split > detail::widen_up(t_exit)));
-      stack[top] = StackEntry<Real>{far, t_split > t_entry ? t_split : t_entry, t_exit};
-      top += push;
-      const std::uint32_t take_far = 0u - far_only;
-      index = near ^ ((near ^ far) & take_far);
-      node = node_of_bits(near_bits ^ ((near_bits ^ far_bits) & (0ull - far_only)));
-      const Real near_exit = t_split < t_exit ? t_split : t_exit;
-      t_exit = far_only ? t_exit : near_exit;
-    }
-    ++stats.nodes_visited;
+    std::uint64_t visited = 0;
+    BoxNode node;
+#if defined(KDSPACE_AVX2_DISPATCH)
+    if constexpr (Wide)
+      node = detail::descend_avx(nodes_.data(), entry.node, entry.t_entry, entry.t_exit, r, descent,
+                                 stack.data(), top, visited);
+    else
+#endif
+      node = detail::descend(nodes_.data(), entry.node, entry.t_entry, entry.t_exit, r, stack.data(), top,
+                             visited);
+    stats.nodes_visited += visited;
     {
       const std::uint32_t count = node.count();
       stats.boxes_tested += count;
@@ -213,8 +174,7 @@ Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) co
         // are not masked off: a repeated box gives the same hit, which changes nothing (equal t,
         // equal index), and the mask cost a branch at every block (3.5% of the instructions of a
         // random ray that hits).
-        unsigned lanes =
-            detail::leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best_bound);
+        unsigned lanes = detail::leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best_bound);
         while (lanes != 0) {
           const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
           lanes &= lanes - 1;
