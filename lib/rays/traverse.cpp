@@ -6,7 +6,8 @@
 // visited first, over [t_entry, t_split], and the far child afterwards, over [t_split, t_exit], only
 // when the ray reaches it inside the cell. A box may be referenced by several leaves and its hit may
 // lie beyond the leaf being tested, so the search goes on while a pending node could still hold a
-// hit no farther than the best one (t_entry <= best t; equality matters for the tie rule).
+// hit no farther than the best one (t_entry <= best t; equality matters for the tie rule). The
+// descent from a node to a leaf, without a branch on the ray, is in descent.hpp.
 //
 // Robustness and precision:
 //   - whether and where a box is hit is decided in double, from the float data:
