@@ -1,13 +1,14 @@
 // rays_walk: one batch of random rays through one scene's BoxTree, for instruction counts
 // (valgrind --tool=callgrind --branch-sim=yes --toggle-collect='*trace_batch*').
 //
-//   rays_walk MESH_FILE|uniform|clustered [--boxes N] [--rays M] [--any-hit] [--reps R]
+//   rays_walk MESH_FILE|uniform|clustered [--boxes N] [--rays M] [--primary WxH] [--any-hit] [--reps R]
 //
 // Builds the default tree over a mesh's triangle boxes (bench/real_data/mesh_io.hpp formats) or over
 // N generated boxes (default 1e5), makes M random rays (default 1e5; kdspace::random_rays, seed 2,
 // as kdspace-rays-bench) and traces them R times (default 1) with closest_hit_batch (or
-// any_hit_batch) on one thread. Prints the hits, the nodes and boxes per ray, and the trace's CPU
-// time per ray.
+// any_hit_batch) on one thread. With --primary, the camera rays of a WxH image instead
+// (kdspace::fit_camera, as kdspace-rays-bench; traced in packets). Prints the hits, the nodes and boxes per
+// ray, and the trace's CPU time per ray.
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
@@ -32,14 +33,15 @@ double cpu_seconds() {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(
-        stderr,
-        "usage: rays_walk MESH_FILE|uniform|clustered [--boxes N] [--rays M] [--any-hit] [--reps R]\n");
+    std::fprintf(stderr,
+                 "usage: rays_walk MESH_FILE|uniform|clustered [--boxes N] [--rays M] [--primary WxH] "
+                 "[--any-hit] [--reps R]\n");
     return 2;
   }
   const std::string scene = argv[1];
   std::size_t n = 100000, m = 100000, reps = 1;
   bool any = false;
+  std::size_t width = 0, height = 0;
   for (int i = 2; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "--boxes" && i + 1 < argc)
@@ -48,6 +50,9 @@ int main(int argc, char** argv) {
       m = std::strtoull(argv[++i], nullptr, 10);
     else if (arg == "--reps" && i + 1 < argc)
       reps = std::strtoull(argv[++i], nullptr, 10);
+    else if (arg == "--primary" && i + 1 < argc &&
+             std::sscanf(argv[i + 1], "%zux%zu", &width, &height) == 2 && width > 0 && height > 0)
+      ++i;
     else if (arg == "--any-hit")
       any = true;
     else {
@@ -63,7 +68,12 @@ int main(int argc, char** argv) {
   else
     boxes = bench::triangle_boxes(bench::read_mesh(scene));
   const BoxTree tree(boxes);
-  const std::vector<Ray> rays = random_rays(m, tree.bounds(), 2);
+  const std::vector<Ray> rays =
+      width > 0
+          ? primary_rays(fit_camera(tree.bounds(), static_cast<double>(width) / static_cast<double>(height)),
+                         width, height)
+          : random_rays(m, tree.bounds(), 2);
+  m = rays.size();
   double best = 1e300;
   std::size_t hit_count = 0;
   RayStats stats;
