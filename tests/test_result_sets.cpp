@@ -90,6 +90,23 @@ TEST_CASE(
       });
 }
 
+TEST_CASE(
+    "result sets: NearestResults keeps the heap's candidate for k = 1, offer by offer, ties and infinities "
+    "included",
+    "[points][result_sets]") {
+  std::mt19937 rng(14);
+  for_each_setting(1, 1, [&](std::size_t k, int values, float limit) {
+    for (std::size_t length :
+         {std::size_t{0}, std::size_t{1}, std::size_t{2}, std::size_t{30}, std::size_t{1000}}) {
+      const auto stream = make_stream(length, values, rng);
+      std::vector<Candidate<float>> storage;
+      kdspace::detail::NearestResults<float> results(limit, storage);
+      INFO(values << " values, limit " << limit << ", " << length << " offers");
+      CHECK(differs_from_heap(results, k, limit, stream) == "");
+    }
+  });
+}
+
 #if defined(__SSE2__)
 TEST_CASE(
     "result sets: ChunkedKnnResults keeps the heap's candidates, offer by offer, ties and infinities "

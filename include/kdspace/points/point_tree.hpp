@@ -34,6 +34,7 @@
 #include "kdspace/points/detail/builder.hpp"
 #include "kdspace/points/detail/fixed_distance.hpp"
 #include "kdspace/points/detail/input_checks.hpp"
+#include "kdspace/points/detail/leaf_scan3.hpp"
 #include "kdspace/points/detail/morton_order.hpp"
 #include "kdspace/points/detail/neighbor_output.hpp"
 #include "kdspace/points/detail/node.hpp"
@@ -524,6 +525,15 @@ class PointTree {
       return internal_distance(metric_, q, p, d);
   }
 
+  // 3-D float points under L2: four at a time (detail/leaf_scan3.hpp), the same distances.
+  template <int D>
+  static constexpr bool scans_four_at_once =
+#if defined(__SSE2__)
+      D == 3 && std::is_same_v<T, float> && std::is_same_v<Metric, L2>;
+#else
+      false;
+#endif
+
   template <int D, class Results>
   void scan_leaf_as(const Node& leaf, Context& ctx, Results& results) const {
     const std::size_t d = D > 0 ? static_cast<std::size_t>(D) : dim();
@@ -541,10 +551,20 @@ class PointTree {
     if constexpr (detail::fills_at_once<Results>) {
       if (results.empty() && count <= Results::max_fill) {
         T dist[Results::max_fill];
+        if constexpr (scans_four_at_once<D>) {
+          if (count >= 4) {
+            detail::l2_distances3(ctx.q, p, count, dist);
+            results.fill(dist, order_.data() + first, count);
+            return;
+          }
+        }
         for (std::size_t i = 0; i < count; ++i, p += d) dist[i] = leaf_distance<D>(ctx.q, p, d);
         results.fill(dist, order_.data() + first, count);
         return;
       }
+    }
+    if constexpr (scans_four_at_once<D>) {
+      if (count >= 4) return detail::scan_leaf3_l2(ctx.q, p, order_.data() + first, count, results);
     }
     // Most points are farther than the k-th kept: a comparison with the bound turns them away before
     // the result set (and the original index) is touched. A tie with the bound may still enter.
