@@ -386,6 +386,52 @@ TEST_CASE("joins: runs of pairs are placed in order by rank, ties of distance an
   }
 }
 
+TEST_CASE("joins: a k-NN table keeps the first k offers in (distance, index) order, ties and partial rows included",
+          "[joins][exact]") {
+  using kdspace::detail::Candidate;
+  using kdspace::detail::KnnTable;
+  std::mt19937 rng(43);
+  const double inf = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 1; k <= 40; ++k) {  // sorted rows up to 32, heaps beyond
+    for (int trial = 0; trial < 10; ++trial) {
+      // Seven rows offered interleaved (largest_kth takes four rows at a time), distances from few
+      // values so that many tie on distance.
+      const std::size_t rows = 7, offers = k + rng() % 50;
+      KnnTable<double> table(rows, k);
+      std::vector<std::vector<Candidate<double>>> offered(rows);
+      std::vector<std::uint32_t> index(300);
+      std::iota(index.begin(), index.end(), 0u);
+      std::shuffle(index.begin(), index.end(), rng);
+      for (std::size_t j = 0; j < offers * rows; ++j) {
+        const std::size_t row = j % rows;
+        const Candidate<double> c{static_cast<double>(rng() % 6), index[j % index.size()]};
+        if (std::any_of(offered[row].begin(), offered[row].end(), [&](const auto& o) { return o.index == c.index; }))
+          continue;  // a join offers a point to a row once
+        offered[row].push_back(c);
+        table.offer(row, c.dist, c.index);
+        std::vector<Candidate<double>> want = offered[row];
+        std::sort(want.begin(), want.end(), kdspace::detail::ComesBefore{});
+        CAPTURE(k, trial, j, row);
+        REQUIRE(table.kth(row) == (want.size() < k ? inf : want[k - 1].dist));
+      }
+      double largest = 0;
+      for (std::size_t row = 0; row < rows; ++row) {
+        std::vector<Candidate<double>> want = offered[row];
+        std::sort(want.begin(), want.end(), kdspace::detail::ComesBefore{});
+        want.resize(k, Candidate<double>{inf, std::numeric_limits<std::uint32_t>::max()});
+        largest = std::max(largest, table.kth(row));
+        REQUIRE(table.largest_kth(0, row + 1) == largest);
+        const Candidate<double>* got = table.sorted_row(row);
+        for (std::size_t i = 0; i < k; ++i) {
+          CAPTURE(k, trial, row, i);
+          REQUIRE(got[i].index == want[i].index);
+          REQUIRE(got[i].dist == want[i].dist);
+        }
+      }
+    }
+  }
+}
+
 TEST_CASE("joins: smaller_index picks the smaller of two indices", "[joins]") {
   using kdspace::detail::smaller_index;
   const std::uint32_t top = std::numeric_limits<std::uint32_t>::max();
