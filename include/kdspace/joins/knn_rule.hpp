@@ -71,9 +71,8 @@ class KnnTable {
   /// order (the decision of KnnResults::offer); false when refused.
   bool offer(std::size_t i, T dist, std::uint32_t index) {
     Candidate<T>* row = candidates_.data() + i * k_;
-    const Candidate<T> c{dist, index};
-    if (!sorted_rows_) return offer_to_heap(i, row, c);
-    if (!comes_before(c, row[k_ - 1])) return false;
+    if (!sorted_rows_) return offer_to_heap(i, row, Candidate<T>{dist, index});
+    if (!(dist < row[k_ - 1].dist || (dist == row[k_ - 1].dist && index < row[k_ - 1].index))) return false;
     // The search for its place starts after the real entries: the placeholders come after every
     // real candidate, and stepping over them one by one cost 45 moves a point for k = 10. A full
     // row's last entry is the one dropped. (Without a branch: whether the row is full is as good
@@ -84,7 +83,10 @@ class KnnTable {
     // Past the entries of larger distance, then past those of equal distance and larger index.
     for (; place > 0 && dist < row[place - 1].dist; --place) row[place] = row[place - 1];
     for (; place > 0 && dist == row[place - 1].dist && index < row[place - 1].index; --place) row[place] = row[place - 1];
-    row[place] = c;
+    // Field by field: a Candidate made on the stack and copied whole was read back as 16 bytes
+    // right after its two parts were written (a store-forwarding stall on each insertion).
+    row[place].dist = dist;
+    row[place].index = index;
     kth_[i] = row[k_ - 1].dist;
     return true;
   }
