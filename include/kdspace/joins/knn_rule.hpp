@@ -28,8 +28,8 @@ namespace kdspace::detail {
 ///
 /// Every row starts full of placeholders (+inf, largest index), which any real candidate comes
 /// before (a real index is smaller; +inf distances included): so an offer is one comparison with the
-/// row's last (or top) entry and never asks how full the row is, and kth(i) is that entry's
-/// distance. A join offers k or more real points to every row (k is at most the points available),
+/// row's last (or top) entry whether or not the row is full, and kth(i) is that entry's distance
+/// (a sorted row also counts its real entries, only to start the search for a place after them). A join offers k or more real points to every row (k is at most the points available),
 /// so no placeholder is left at the end.
 ///
 /// For k up to sorted_rows_up_to a row is kept in result order ((distance, index) ascending): a join
