@@ -80,9 +80,14 @@ class KnnTable {
     const std::size_t held = held_[i];
     std::size_t place = held - (held == k_);
     held_[i] = static_cast<HeldCount>(place + 1);
-    // Past the entries of larger distance, then past those of equal distance and larger index.
-    for (; place > 0 && dist < row[place - 1].dist; --place) row[place] = row[place - 1];
-    for (; place > 0 && dist == row[place - 1].dist && index < row[place - 1].index; --place) row[place] = row[place - 1];
+    // Past the entries it comes before: one loop, whose test on the index runs only on equal
+    // distances (a second loop for ties cost its test on every insertion: callgrind 1090.3e6 ->
+    // 1084.5e6 instructions, 2e5 uniform 3-D points, k = 10).
+    for (; place > 0; --place) {
+      const T before = row[place - 1].dist;
+      if (!(dist < before || (dist == before && index < row[place - 1].index))) break;
+      row[place] = row[place - 1];
+    }
     // Field by field: a Candidate made on the stack and copied whole was read back as 16 bytes
     // right after its two parts were written (a store-forwarding stall on each insertion).
     row[place].dist = dist;
