@@ -358,6 +358,24 @@ TEST_CASE("joins: pairs of a few thousand points come in order, at and around ex
   }
 }
 
+TEST_CASE("joins: a self range join over leaves of exactly 64 points equals brute force", "[joins][exact]") {
+  // range joins use 64-point leaves: the last point of a full leaf starts its own-leaf mask at 64
+  for (const std::size_t n : {std::size_t{64}, std::size_t{128}, std::size_t{200}}) {
+    CAPTURE(n);
+    const std::size_t dim = 3;
+    const Torus<float> space(boxsize_for<float>(Shape::uniform, dim, false), dim);
+    const std::vector<float> points = make_points<float>(Shape::uniform, n, dim, 900 + static_cast<std::uint32_t>(n));
+    const PointTree<float> tree(points.data(), n, dim);
+    const auto table = DistanceTable<float>::template make<kdspace::L2>(space, points, points);
+    for (const float r : {0.0f, 0.25f, 10.0f}) {
+      CAPTURE(r);
+      const auto want = brute_pairs<kdspace::L2>(table, true, r);
+      REQUIRE(kdspace::distances_within(tree, r, JoinParams{}) == want);
+      REQUIRE(kdspace::pairs_within(tree, r, JoinParams{}) == indices_of(want));
+    }
+  }
+}
+
 TEST_CASE("joins: runs of pairs are placed in order by rank, ties of distance and long runs included",
           "[joins][exact]") {
   using kdspace::detail::FoundPair;

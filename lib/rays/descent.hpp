@@ -154,7 +154,9 @@ __attribute__((target("avx2"))) inline BoxNode descend_avx(const BoxNode* nodes,
     info = static_cast<std::uint32_t>(_mm_extract_epi32(_mm_castps_si128(node), 1));
   }
   ++visited;
-  return node_of_bits(static_cast<std::uint64_t>(_mm_cvtsi128_si64(_mm_castps_si128(node))));
+  std::uint64_t bits;  // the node's eight bytes (_mm_cvtsi128_si64 exists on x86-64 only)
+  _mm_storel_epi64(reinterpret_cast<__m128i*>(&bits), _mm_castps_si128(node));
+  return node_of_bits(bits);
 }
 #endif
 
