@@ -534,6 +534,14 @@ class PointTree {
       false;
 #endif
 
+  // The distances from q to a leaf's `count` points at p, into dist: four at a time where it can.
+  template <int D>
+  void leaf_distances(const T* q, const T* p, std::size_t count, std::size_t d, T* dist) const {
+    if constexpr (scans_four_at_once<D>)
+      if (count >= 4) return detail::l2_distances3(q, p, count, dist);
+    for (std::size_t i = 0; i < count; ++i, p += d) dist[i] = leaf_distance<D>(q, p, d);
+  }
+
   template <int D, class Results>
   void scan_leaf_as(const Node& leaf, Context& ctx, Results& results) const {
     const std::size_t d = D > 0 ? static_cast<std::size_t>(D) : dim();
@@ -551,14 +559,7 @@ class PointTree {
     if constexpr (detail::fills_at_once<Results>) {
       if (results.empty() && count <= Results::max_fill) {
         T dist[Results::max_fill];
-        if constexpr (scans_four_at_once<D>) {
-          if (count >= 4) {
-            detail::l2_distances3(ctx.q, p, count, dist);
-            results.fill(dist, order_.data() + first, count);
-            return;
-          }
-        }
-        for (std::size_t i = 0; i < count; ++i, p += d) dist[i] = leaf_distance<D>(ctx.q, p, d);
+        leaf_distances<D>(ctx.q, p, count, d, dist);
         results.fill(dist, order_.data() + first, count);
         return;
       }
