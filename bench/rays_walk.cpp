@@ -41,6 +41,7 @@ int main(int argc, char** argv) {
   const std::string scene = argv[1];
   std::size_t n = 100000, m = 100000, reps = 1;
   bool any = false;
+  BoxBuildParams params;
   std::size_t width = 0, height = 0;
   for (int i = 2; i < argc; ++i) {
     const std::string arg = argv[i];
@@ -55,6 +56,10 @@ int main(int argc, char** argv) {
       ++i;
     else if (arg == "--any-hit")
       any = true;
+    else if (arg == "--ki" && i + 1 < argc)
+      params.K_i = std::strtof(argv[++i], nullptr);
+    else if (arg == "--bonus" && i + 1 < argc)
+      params.empty_bonus = std::strtof(argv[++i], nullptr);
     else {
       std::fprintf(stderr, "rays_walk: unknown argument %s\n", arg.c_str());
       return 2;
@@ -67,7 +72,7 @@ int main(int argc, char** argv) {
     boxes = generate_boxes(n, SceneKind::clustered, 1);
   else
     boxes = bench::triangle_boxes(bench::read_mesh(scene));
-  const BoxTree tree(boxes);
+  const BoxTree tree(boxes, params);
   const std::vector<Ray> rays =
       width > 0
           ? primary_rays(fit_camera(tree.bounds(), static_cast<double>(width) / static_cast<double>(height)),
@@ -88,8 +93,8 @@ int main(int argc, char** argv) {
     stats = local;
   }
   std::printf(
-      "%zu boxes, %zu rays, %zu hit; %.2f nodes, %.2f boxes a ray; best %.1f ns a ray\n", boxes.size(),
+      "%zu boxes, %zu rays, %zu hit; %.2f nodes, %.2f boxes a ray; best %.1f ns a ray; SAH cost %.1f\n", boxes.size(),
       rays.size(), hit_count, static_cast<double>(stats.nodes_visited) / static_cast<double>(m),
-      static_cast<double>(stats.boxes_tested) / static_cast<double>(m), 1e9 * best / static_cast<double>(m));
+      static_cast<double>(stats.boxes_tested) / static_cast<double>(m), 1e9 * best / static_cast<double>(m), tree.stats().sah_cost);
   return 0;
 }

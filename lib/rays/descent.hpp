@@ -17,6 +17,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 #include "kdspace/boxes/box_tree.hpp"
 #include "traversal_ray.hpp"
@@ -158,6 +159,17 @@ __attribute__((target("avx2"))) inline BoxNode descend_avx(const BoxNode* nodes,
   _mm_storel_epi64(reinterpret_cast<__m128i*>(&bits), _mm_castps_si128(node));
   return node_of_bits(bits);
 }
+#endif
+
+/// What a descent needs of the ray besides TraversalRay: descent_ray(r) for descend_avx (float, with
+/// AVX2), nothing otherwise.
+struct NoDescentRay {};
+#if defined(KDSPACE_AVX2_DISPATCH)
+template <class Real>
+using DescentRayOf = std::conditional_t<std::is_same_v<Real, float>, DescentRay, NoDescentRay>;
+#else
+template <class Real>
+using DescentRayOf = NoDescentRay;
 #endif
 
 }  // namespace kdspace::detail

@@ -43,14 +43,14 @@
 #include "kdspace/error.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/rays/detail/slab.hpp"
+#include "trace_stream.hpp"
 #include "traversal_ray.hpp"
+#include "walk.hpp"
 
 namespace kdspace {
 
 namespace {
 
-using detail::clip_to_box;
-using detail::PreparedRay;
 
 using detail::StackEntry;
 
@@ -116,6 +116,11 @@ inline std::uint32_t sign_key(const Ray& ray) {
   return direction[0] >> 31 | (direction[1] >> 31) << 1 | (direction[2] >> 31) << 2;
 }
 
+/// The most rays a batch's worker takes at a time when the rays that form no packet go in streams:
+/// a stream gains from more rays (more of them share each node), until their state (some 50 bytes
+/// a ray) leaves the cache.
+constexpr std::size_t max_stream_chunk = 65536;
+
 void check_ray(const Ray& ray) {
   if (usable(ray)) return;
   const std::string problem = ray_problem(ray);
@@ -126,78 +131,19 @@ void check_ray(const Ray& ray) {
 
 template <class Real, bool AnyHit, bool Wide>
 Hit BoxTree::trace(const Ray& ray, float t_min, float t_max, RayStats& stats) const {
-  using detail::round_up;
-  constexpr std::uint32_t step_blocks = Wide ? 2 : 1;  // leaf blocks tested together
   ++stats.rays;
-  Hit none;
-  if (boxes_.empty()) return none;
+  if (boxes_.empty()) return Hit{};
   const detail::TraversalRay<Real> r(ray);
   Real t_entry = static_cast<Real>(t_min), t_exit = static_cast<Real>(t_max);
-  if (!detail::clip_widened(bounds_, r, t_entry, t_exit)) return none;
-  // The ray in double for the exact box tests, made when the first box needs one (most rays that
-  // miss everything never do).
-  std::optional<PreparedRay> exact;
-
-  double best_t = t_max;
-  std::int32_t best_box = Hit::none;
-  Real best_bound = static_cast<Real>(t_max);  // best_t rounded up to Real
-  const Real t_low = static_cast<Real>(t_min);
+  if (!detail::clip_widened(bounds_, r, t_entry, t_exit)) return Hit{};
+  detail::DescentRayOf<Real> descent{};
 #if defined(KDSPACE_AVX2_DISPATCH)
-  detail::DescentRay descent{};
   if constexpr (Wide) descent = detail::descent_ray(r);
 #endif
-  std::array<StackEntry<Real>, max_box_tree_depth + 2> stack;
-  std::size_t top = 0;
-  stack[top++] = StackEntry<Real>{0, t_entry, t_exit};
-
-  while (top > 0) {
-    const StackEntry<Real> entry = stack[--top];
-    if (detail::widen_down(entry.t_entry) > best_bound) continue;  // every hit in it is farther
-    std::uint64_t visited = 0;
-    BoxNode node;
-#if defined(KDSPACE_AVX2_DISPATCH)
-    if constexpr (Wide)
-      node = detail::descend_avx(nodes_.data(), entry.node, entry.t_entry, entry.t_exit, r, descent,
-                                 stack.data(), top, visited);
-    else
-#endif
-      node = detail::descend(nodes_.data(), entry.node, entry.t_entry, entry.t_exit, r, stack.data(), top,
-                             visited);
-    stats.nodes_visited += visited;
-    {
-      const std::uint32_t count = node.count();
-      stats.boxes_tested += count;
-      const LeafBlock* blocks = blocks_.data() + node.first() / 4;
-      const std::uint32_t* ids = references_.data() + node.first();
-      for (std::uint32_t done = 0; done < count;
-           done += 4 * step_blocks, blocks += step_blocks, ids += 4 * step_blocks) {
-        // The lanes past count repeat the leaf's last box (checked when a tree is loaded), so they
-        // are not masked off: a repeated box gives the same hit, which changes nothing (equal t,
-        // equal index), and the mask cost a branch at every block (3.5% of the instructions of a
-        // random ray that hits).
-        unsigned lanes = detail::leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best_bound);
-        while (lanes != 0) {
-          const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
-          lanes &= lanes - 1;
-          double t_near = t_min, t_far = best_t;
-          if (!exact) exact.emplace(ray);
-          if (!clip_to_box(detail::box_in_lane(blocks[lane / 4], lane % 4), *exact, t_near, t_far)) continue;
-          const auto box = static_cast<std::int32_t>(ids[lane]);
-          if constexpr (AnyHit) {
-            return Hit{box, detail::to_float_t(t_near)};
-          } else {
-            if (t_near < best_t || best_box == Hit::none || box < best_box) {
-              best_t = t_near;
-              best_box = box;
-              best_bound = round_up<Real>(best_t);
-            }
-          }
-        }
-      }
-    }
-  }
-  if (best_box == Hit::none) return none;
-  return Hit{best_box, detail::to_float_t(best_t)};
+  detail::BestHit<Real> best(t_max);
+  detail::walk<Real, AnyHit, Wide>(detail::view_of(*this), ray, r, descent, StackEntry<Real>{0, t_entry, t_exit},
+                                   t_min, best, stats);
+  return best.hit();
 }
 
 template <bool AnyHit>
@@ -270,11 +216,27 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
     return all_float ? trace_in_float<AnyHit>(ray, range.t_min, range.t_max, local)
                      : trace_any_precision<AnyHit>(ray, range.t_min, range.t_max, local);
   };
-  detail::parallel_for(n, workers, 256, [&](std::size_t begin, std::size_t end, unsigned worker) {
-    RayStats local;
+  // Rays that form no packet go through the tree in streams, one a direction octant
+  // (trace_stream.cpp), where the tree holds boxes in the float range and every ray fits the float
+  // traversal; a stream wants many rays, so the workers then take larger chunks.
+  const bool streams = packets && checked.all_in_packet_range;
+  // With several workers, at least four chunks each, so that they finish together; a multiple of 8,
+  // so that the packets are those of the whole batch.
+  const std::size_t chunk =
+      !streams ? 256
+      : workers == 1
+          ? max_stream_chunk
+          : std::clamp<std::size_t>((n / (4 * workers) + 7) / 8 * 8, 256, max_stream_chunk);
+  std::vector<detail::StreamScratch> scratch(streams ? workers : 0);
+  // Traces rays[begin, end) on `worker`'s behalf, adding to `local`.
+  const auto trace_range = [&](std::size_t begin, std::size_t end, unsigned worker, RayStats& local) {
+    std::array<std::vector<std::uint32_t>, 8>* octant = streams ? &scratch[worker].octant : nullptr;
     const auto trace_four = [&](std::size_t first, bool together) {
       if (together) {
         trace_packet<AnyHit>(rays + first, 4, range, hits.data() + first, local);
+      } else if (streams) {
+        for (std::size_t k = first; k < first + 4; ++k)
+          (*octant)[sign_key(rays[k])].push_back(static_cast<std::uint32_t>(k));
       } else {
         for (std::size_t k = first; k < first + 4; ++k) hits[k] = trace_one(rays[k], local);
       }
@@ -309,6 +271,20 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
       i += 4;
     }
     for (; i < end; ++i) hits[i] = trace_one(rays[i], local);
+    if (streams)
+      for (std::vector<std::uint32_t>& ids : *octant) {
+        if (!ids.empty())
+          detail::trace_stream<AnyHit>(*this, rays, ids.data(), ids.size(), range, hits.data(), local,
+                                       scratch[worker]);
+        ids.clear();
+      }
+  };
+  detail::parallel_for(n, workers, chunk, [&](std::size_t begin, std::size_t end, unsigned worker) {
+    RayStats local;
+    // One worker is handed the whole batch: it too goes chunk by chunk, so that a stream's rays stay
+    // in the cache.
+    for (std::size_t first = begin; first < end; first += chunk)
+      trace_range(first, std::min(end, first + chunk), worker, local);
     per_worker[worker] += local;
   });
   if (stats)
