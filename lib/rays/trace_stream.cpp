@@ -5,35 +5,42 @@
 // A batch's random rays (no two alike, so no packets) each walk about a dozen inner nodes, each step
 // a dependent load and a choice the branch predictor cannot guess. Streamed, the rays of one
 // direction octant go through the tree depth first together: at an inner node every ray of the
-// node's set is split into the near child's set and the far child's set by the same comparisons a
-// single descent makes (descent.hpp), and the near set is traced before the far one. Rays of one
-// octant agree on which child is near at every node, so each ray still meets its cells in its own
+// node's set is split into the near child's set and the far child's set by the comparisons of a
+// single descent (descent.hpp), and the near set is traced before the far one. Rays of one octant
+// agree on which child is near at every node, so each ray still meets its cells in its own
 // front-to-back order, and when the far set's turn comes each of its rays is dropped if its best hit
 // lies before the cell (the test of a single traversal's pop). A node is read once for all its rays,
 // and the per-ray work of a node is a few arithmetic operations on arrays, without a branch on the ray.
-// Where a set falls below stream_min_rays rays, or at a leaf, each ray walks on alone (walk.hpp) from
-// that cell with its interval and its best hit so far.
+// At a leaf reached by enough rays, the leaf's boxes are tested one at a time against eight rays at a
+// time; below stream_min_rays rays an inner node's rays walk on alone (walk.hpp) from that cell with
+// their intervals and their best hits so far.
 //
 // Every ray makes exactly the decisions of its single traversal (the same float parameters, the same
 // widened comparisons, the same leaf tests in the same order), so the hits and the counts
 // (RayStats) are those of single traces.
 #include "trace_stream.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <optional>
 
 #include "kdspace/detail/avx2_dispatch.hpp"
+#include "kdspace/rays/detail/slab.hpp"
+#include "traversal_ray.hpp"
+#include "walk.hpp"
 #if defined(KDSPACE_AVX2_DISPATCH)
 #include <immintrin.h>
 #endif
-#include "traversal_ray.hpp"
-#include "walk.hpp"
 
 namespace kdspace::detail {
+
 namespace {
+
+constexpr float minus_infinity = -std::numeric_limits<float>::infinity();
 
 /// Grows the entry arrays to hold at least `size` entries.
 void reserve_entries(StreamScratch& s, std::size_t size) {
@@ -105,6 +112,13 @@ __attribute__((target("avx2"))) inline __m256i pack_permutation(unsigned mask) {
                           _mm256_set1_epi32(7));
 }
 
+/// Per lane: t widened down / up (widen_down, widen_up, in their order of operations).
+__attribute__((target("avx2"))) inline __m256 widening8(__m256 t) {
+  const __m256 magnitude = _mm256_and_ps(t, _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff)));
+  return _mm256_add_ps(_mm256_mul_ps(magnitude, _mm256_set1_ps(Widening<float>::relative)),
+                       _mm256_set1_ps(Widening<float>::absolute));
+}
+
 /// split_entries eight entries at a time: the same arithmetic and comparisons lane by lane (MINPS
 /// and MAXPS return their second operand for a NaN, as the scalar selects do), the chosen lanes
 /// packed by a permutation and stored whole (the lanes past the count are overwritten later, or
@@ -114,9 +128,6 @@ __attribute__((target("avx2"))) inline std::uint64_t split_entries_avx(const Spl
                                                                       std::uint32_t begin, std::uint32_t end,
                                                                       std::size_t& near_end,
                                                                       std::size_t& far_end) {
-  const __m256 magnitude = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
-  const __m256 relative = _mm256_set1_ps(Widening<float>::relative);
-  const __m256 absolute = _mm256_set1_ps(Widening<float>::absolute);
   const __m256 split = _mm256_set1_ps(node.split);
   const __m256i lane_index = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   std::uint64_t visited = 0;
@@ -130,10 +141,8 @@ __attribute__((target("avx2"))) inline std::uint64_t split_entries_avx(const Spl
     const __m256 bound = _mm256_i32gather_ps(node.bound, ray, 4);
     const __m256 origin = _mm256_i32gather_ps(node.origin, ray, 4);
     const __m256 inverse = _mm256_i32gather_ps(node.inverse, ray, 4);
-    const __m256 entry_low = _mm256_sub_ps(
-        t_entry, _mm256_add_ps(_mm256_mul_ps(_mm256_and_ps(t_entry, magnitude), relative), absolute));
-    const __m256 exit_high = _mm256_add_ps(
-        t_exit, _mm256_add_ps(_mm256_mul_ps(_mm256_and_ps(t_exit, magnitude), relative), absolute));
+    const __m256 entry_low = _mm256_sub_ps(t_entry, widening8(t_entry));
+    const __m256 exit_high = _mm256_add_ps(t_exit, widening8(t_exit));
     const __m256 alive = _mm256_and_ps(_mm256_cmp_ps(entry_low, bound, _CMP_NGT_UQ), _mm256_castsi256_ps(valid));
     const __m256 t_split = _mm256_mul_ps(_mm256_sub_ps(split, origin), inverse);
     const __m256 far_only = _mm256_cmp_ps(t_split, entry_low, _CMP_LT_OQ);
@@ -157,153 +166,323 @@ __attribute__((target("avx2"))) inline std::uint64_t split_entries_avx(const Spl
 }
 #endif
 
+/// One stream: the rays of one octant, their state by slot (SoA), the sets of the pending cells.
 template <bool AnyHit, bool Wide>
-inline void stream(const BoxTree& tree, const Ray* rays, const std::uint32_t* ids, std::size_t n, RayRange range,
-                   Hit* hits, RayStats& stats, StreamScratch& s) {
-  const BoxTreeView view = view_of(tree);
-  const std::size_t capacity = n;
-  s.origin.resize(3 * capacity);
-  s.inverse.resize(3 * capacity);
-  s.best_t.resize(capacity);
-  s.best_bound.resize(capacity);
-  s.best_box.resize(capacity);
-  reserve_entries(s, capacity + 16);
+class Stream {
+ public:
+  Stream(const BoxTree& tree, const Ray* rays, RayRange range, RayStats& stats, StreamScratch& s)
+      : tree_(tree), view_(view_of(tree)), rays_(rays), range_(range), stats_(stats), s_(s) {}
 
-  // The rays that meet the scene's bounds, one slot each; the others miss.
-  std::vector<std::uint32_t> ray_of;  // by slot: the ray's position in the batch
-  ray_of.reserve(n);
-  std::uint32_t negative = 0;  // bit a: the rays run towards -a
-  std::size_t m = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Ray& ray = rays[ids[i]];
-    ++stats.rays;
-    const TraversalRay<float> r(ray);
-    float t_entry = range.t_min, t_exit = range.t_max;
-    if (!clip_widened(tree.bounds(), r, t_entry, t_exit)) {
-      hits[ids[i]] = Hit{};
-      continue;
+  /// Traces rays[ids[0 .. n)], writing hits[ids[i]].
+  void run(const std::uint32_t* ids, std::size_t n, Hit* hits) {
+    admit(ids, n, hits);
+    s_.tasks.clear();
+    if (count_ > 0) s_.tasks.push_back(StreamScratch::Task{0, 0, static_cast<std::uint32_t>(count_)});
+    while (!s_.tasks.empty()) {
+      const StreamScratch::Task task = s_.tasks.back();
+      s_.tasks.pop_back();
+      const BoxNode node = view_.nodes[task.node];
+      if (node.is_leaf())
+        at_leaf(node, task);
+      else if (task.end - task.begin < stream_min_rays)
+        for (std::uint32_t e = task.begin; e < task.end; ++e)
+          walk_alone(s_.slot[e], task.node, s_.enter[e], s_.exit[e]);
+      else
+        split(node, task);
     }
-    negative = negative_axes(r);
-    for (int a = 0; a < 3; ++a) {
-      s.origin[a * capacity + m] = r.origin[a];
-      s.inverse[a * capacity + m] = r.inverse[a];
+    for (std::size_t slot = 0; slot < count_; ++slot) {
+      Hit h;
+      if (s_.best_box[slot] != Hit::none) h = Hit{s_.best_box[slot], to_float_t(s_.best_t[slot])};
+      hits[s_.ray_of[slot]] = h;
     }
-    s.best_t[m] = range.t_max;
-    s.best_bound[m] = range.t_max;
-    s.best_box[m] = Hit::none;
-    s.slot[m] = static_cast<std::uint32_t>(m);
-    s.enter[m] = t_entry;
-    s.exit[m] = t_exit;
-    ray_of.push_back(ids[i]);
-    ++m;
   }
 
-  const auto ray_at = [&](std::uint32_t slot) {
+ private:
+  /// A slot for each ray that meets the scene's bounds, with its interval there as the root's set;
+  /// the others miss.
+  void admit(const std::uint32_t* ids, std::size_t n, Hit* hits) {
+    // 8 slots of slack past n in every per-ray array (by axis too), for admit_avx's whole-register
+    // stores.
+    capacity_ = n + 8;
+    s_.origin.resize(3 * capacity_);
+    s_.inverse.resize(3 * capacity_);
+    s_.best_t.resize(capacity_);
+    s_.best_bound.resize(capacity_);
+    s_.best_box.resize(capacity_);
+    s_.ray_of.resize(capacity_);
+    reserve_entries(s_, n + 16);
+    count_ = 0;
+    stats_.rays += n;
+    if (n == 0) return;
+    {
+      std::uint32_t direction[3];
+      std::memcpy(direction, rays_[ids[0]].direction.data(), sizeof direction);
+      negative_ = direction[0] >> 31 | (direction[1] >> 31) << 1 | (direction[2] >> 31) << 2;
+    }
+    std::size_t i = 0;
+#if defined(KDSPACE_AVX2_DISPATCH)
+    if constexpr (Wide) i = admit_avx(ids, n, hits);
+#endif
+    for (; i < n; ++i) {
+      const TraversalRay<float> r(rays_[ids[i]]);
+      float t_entry = range_.t_min, t_exit = range_.t_max;
+      if (!clip_widened(tree_.bounds(), r, t_entry, t_exit)) {
+        hits[ids[i]] = Hit{};
+        continue;
+      }
+      const std::size_t slot = count_++;
+      for (int a = 0; a < 3; ++a) {
+        s_.origin[a * capacity_ + slot] = r.origin[a];
+        s_.inverse[a * capacity_ + slot] = r.inverse[a];
+      }
+      s_.best_t[slot] = range_.t_max;
+      s_.best_bound[slot] = range_.t_max;
+      s_.best_box[slot] = Hit::none;
+      s_.ray_of[slot] = ids[i];
+      s_.slot[slot] = static_cast<std::uint32_t>(slot);
+      s_.enter[slot] = t_entry;
+      s_.exit[slot] = t_exit;
+    }
+  }
+
+#if defined(KDSPACE_AVX2_DISPATCH)
+  /// admit's loop eight rays at a time, as far as whole groups of eight go; returns the rays done.
+  /// The same arithmetic as TraversalRay and clip_widened lane by lane (min and max with their
+  /// operands in std::min's and std::max's order); a stream's rays have no zero direction
+  /// component (the packet range), so no axis is parallel.
+  __attribute__((target("avx2"))) std::size_t admit_avx(const std::uint32_t* ids, std::size_t n, Hit* hits) {
+    // Rays are gathered by 32-bit word offsets from the first one: a chunk is far smaller than this.
+    if (ids[n - 1] - ids[0] >= (1u << 26)) return 0;
+    const float* words = rays_[ids[0]].origin.data();
+    const Box3f& bounds = tree_.bounds();
+    const __m256i first = _mm256_set1_epi32(static_cast<int>(ids[0]));
+    const __m256i lane_index = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256 one = _mm256_set1_ps(1.0f);
+    std::size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+      const __m256i id = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(ids + i));
+      const __m256i offset = _mm256_mullo_epi32(_mm256_sub_epi32(id, first), _mm256_set1_epi32(6));
+      __m256 origin[3], inverse[3];
+      __m256 t_lo = _mm256_set1_ps(range_.t_min), t_hi = _mm256_set1_ps(range_.t_max);
+      for (int a = 0; a < 3; ++a) {
+        origin[a] = _mm256_i32gather_ps(words + a, offset, 4);
+        inverse[a] = _mm256_div_ps(one, _mm256_i32gather_ps(words + 3 + a, offset, 4));
+        const __m256 t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(bounds.lo[a]), origin[a]), inverse[a]);
+        const __m256 t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(bounds.hi[a]), origin[a]), inverse[a]);
+        const __m256 enter = _mm256_min_ps(t1, t0), leave = _mm256_max_ps(t1, t0);
+        t_lo = _mm256_max_ps(_mm256_sub_ps(enter, widening8(enter)), t_lo);
+        t_hi = _mm256_min_ps(_mm256_add_ps(leave, widening8(leave)), t_hi);
+      }
+      const auto inside = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(t_lo, t_hi, _CMP_LE_OQ)));
+      const __m256i order = pack_permutation(inside);
+      const std::size_t m = count_;
+      for (int a = 0; a < 3; ++a) {
+        _mm256_storeu_ps(s_.origin.data() + a * capacity_ + m, _mm256_permutevar8x32_ps(origin[a], order));
+        _mm256_storeu_ps(s_.inverse.data() + a * capacity_ + m, _mm256_permutevar8x32_ps(inverse[a], order));
+      }
+      _mm256_storeu_ps(s_.enter.data() + m, _mm256_permutevar8x32_ps(t_lo, order));
+      _mm256_storeu_ps(s_.exit.data() + m, _mm256_permutevar8x32_ps(t_hi, order));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(s_.ray_of.data() + m), _mm256_permutevar8x32_epi32(id, order));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(s_.slot.data() + m),
+                          _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(m)), lane_index));
+      _mm256_storeu_ps(s_.best_bound.data() + m, _mm256_set1_ps(range_.t_max));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(s_.best_box.data() + m), _mm256_set1_epi32(Hit::none));
+      const __m256d t_max = _mm256_set1_pd(range_.t_max);
+      _mm256_storeu_pd(s_.best_t.data() + m, t_max);
+      _mm256_storeu_pd(s_.best_t.data() + m + 4, t_max);
+      count_ += static_cast<std::size_t>(__builtin_popcount(inside));
+      for (unsigned missed = ~inside & 0xffu; missed != 0; missed &= missed - 1)
+        hits[ids[i + static_cast<unsigned>(__builtin_ctz(missed))]] = Hit{};
+    }
+    return i;
+  }
+#endif
+
+  TraversalRay<float> ray_at(std::uint32_t slot) const {
     TraversalRay<float> r;
     for (int a = 0; a < 3; ++a) {
-      r.origin[a] = s.origin[a * capacity + slot];
-      r.inverse[a] = s.inverse[a * capacity + slot];
-      r.negative[a] = (negative >> a) & 1u;
+      r.origin[a] = s_.origin[a * capacity_ + slot];
+      r.inverse[a] = s_.inverse[a * capacity_ + slot];
+      r.negative[a] = (negative_ >> a) & 1u;
 #if defined(__SSE2__)
       r.origin4[a] = _mm_set1_ps(r.origin[a]);
       r.inverse4[a] = _mm_set1_ps(r.inverse[a]);
 #endif
     }
     return r;
-  };
-  const auto best_at = [&](std::uint32_t slot) {
-    BestHit<float> best(range.t_max);
-    best.t = s.best_t[slot];
-    best.box = s.best_box[slot];
-    best.bound = s.best_bound[slot];
+  }
+  BestHit<float> best_at(std::uint32_t slot) const {
+    BestHit<float> best(range_.t_max);
+    best.t = s_.best_t[slot];
+    best.box = s_.best_box[slot];
+    best.bound = s_.best_bound[slot];
     return best;
-  };
-  const auto keep = [&](std::uint32_t slot, const BestHit<float>& best) {
-    s.best_t[slot] = best.t;
-    s.best_box[slot] = best.box;
+  }
+  void keep(std::uint32_t slot, const BestHit<float>& best) {
+    s_.best_t[slot] = best.t;
+    s_.best_box[slot] = best.box;
     // An any-hit ray is done at its first hit: no cell is entered for it again.
-    s.best_bound[slot] = AnyHit && best.box != Hit::none ? -std::numeric_limits<float>::infinity() : best.bound;
-  };
-  // One ray walks on alone from `node` over [t_entry, t_exit].
-  const auto walk_alone = [&](std::uint32_t slot, std::uint32_t node, float t_entry, float t_exit) {
+    s_.best_bound[slot] = AnyHit && best.box != Hit::none ? minus_infinity : best.bound;
+  }
+
+  /// One ray walks on alone from `node` over [t_entry, t_exit].
+  void walk_alone(std::uint32_t slot, std::uint32_t node, float t_entry, float t_exit) {
     const TraversalRay<float> r = ray_at(slot);
     DescentRayOf<float> descent{};
 #if defined(KDSPACE_AVX2_DISPATCH)
     if constexpr (Wide) descent = descent_ray(r);
 #endif
     BestHit<float> best = best_at(slot);
-    walk<float, AnyHit, Wide>(view, rays[ray_of[slot]], r, descent, StackEntry<float>{node, t_entry, t_exit},
-                              range.t_min, best, stats);
+    walk<float, AnyHit, Wide>(view_, rays_[s_.ray_of[slot]], r, descent, StackEntry<float>{node, t_entry, t_exit},
+                              range_.t_min, best, stats_);
     keep(slot, best);
-  };
-  // The rays of a task at a leaf: each ray still short of its best hit tests the leaf's boxes.
-  const auto at_leaf = [&](const BoxNode& leaf, const StreamScratch::Task& task) {
-    std::uint64_t visited = 0;
+  }
+
+  /// The rays of a task at a leaf: each ray still short of its best hit tests the leaf's boxes, in
+  /// the leaf's order.
+  void at_leaf(const BoxNode& leaf, const StreamScratch::Task& task) {
+    std::uint32_t* entering = s_.leaf_rays.data();
+    std::size_t n = 0;
     for (std::uint32_t e = task.begin; e < task.end; ++e) {
-      const std::uint32_t slot = s.slot[e];
-      if (widen_down(s.enter[e]) > s.best_bound[slot]) continue;  // a single trace's pop
-      ++visited;
-      if (leaf.count() == 0) continue;
+      const std::uint32_t slot = s_.slot[e];
+      entering[n] = slot;
+      n += widen_down(s_.enter[e]) > s_.best_bound[slot] ? 0 : 1;  // a single trace's pop
+    }
+    stats_.nodes_visited += n;
+    if (leaf.count() == 0 || n == 0) return;
+    std::size_t i = 0;
+#if defined(KDSPACE_AVX2_DISPATCH)
+    // Whole groups of eight rays box by box; the rest one by one (a group of a few rays costs as
+    // much as a full one).
+    if constexpr (Wide)
+      for (; i + 8 <= n; i += 8) leaf_by_boxes(leaf, entering + i);
+#endif
+    for (; i < n; ++i) {
+      const std::uint32_t slot = entering[i];
       const TraversalRay<float> r = ray_at(slot);
       BestHit<float> best = best_at(slot);
       std::optional<PreparedRay> exact;
-      test_leaf<float, AnyHit, Wide>(view, leaf, rays[ray_of[slot]], r, range.t_min, exact, best, stats);
+      test_leaf<float, AnyHit, Wide>(view_, leaf, rays_[s_.ray_of[slot]], r, range_.t_min, exact, best, stats_);
       keep(slot, best);
     }
-    stats.nodes_visited += visited;
-  };
+  }
 
-  s.tasks.clear();
-  if (m > 0) s.tasks.push_back(StreamScratch::Task{0, 0, static_cast<std::uint32_t>(m)});
-  while (!s.tasks.empty()) {
-    const StreamScratch::Task task = s.tasks.back();
-    s.tasks.pop_back();
-    const BoxNode node = view.nodes[task.node];
+#if defined(KDSPACE_AVX2_DISPATCH)
+  /// test_leaf for the eight rays slots[0 .. 8), all of them against one box at a time: for each
+  /// ray the same float filter (block_pair_candidates' operations in its order) and the same double
+  /// test, box after box in the leaf's order. A ray's bound drops as its best hit does, so a box is
+  /// filtered with the bound its predecessors left (never tighter than its double test, which
+  /// decides alone), and an any-hit ray stops at the first box it hits.
+  __attribute__((target("avx2"))) void leaf_by_boxes(const BoxNode& leaf, const std::uint32_t* slots) {
+    const std::uint32_t count = leaf.count();
+    stats_.boxes_tested += static_cast<std::uint64_t>(count) * 8;
+    int enter_plane[3], leave_plane[3];
+    for (int a = 0; a < 3; ++a) {
+      const int negative = static_cast<int>((negative_ >> a) & 1u);
+      enter_plane[a] = a + 3 * negative;
+      leave_plane[a] = a + 3 - 3 * negative;
+    }
+    const __m256i slot = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots));
+    __m256 origin[3], inverse[3];
+    for (int a = 0; a < 3; ++a) {
+      origin[a] = _mm256_i32gather_ps(s_.origin.data() + a * capacity_, slot, 4);
+      inverse[a] = _mm256_i32gather_ps(s_.inverse.data() + a * capacity_, slot, 4);
+    }
+    const __m256 t_low = _mm256_set1_ps(range_.t_min);
+    __m256 bound = _mm256_i32gather_ps(s_.best_bound.data(), slot, 4);
+    const LeafBlock* block = view_.blocks + leaf.first() / 4;
+    const std::uint32_t* ids = view_.references + leaf.first();
+    for (std::uint32_t done = 0; done < count; done += 4, ++block) {
+      const unsigned lanes = std::min(4u, count - done);
+      for (unsigned lane = 0; lane < lanes; ++lane) {
+        __m256 t_near = t_low, t_far = bound;
+        for (int a = 0; a < 3; ++a) {
+          const __m256 t0 =
+              _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(block->plane[enter_plane[a]][lane]), origin[a]), inverse[a]);
+          const __m256 t1 =
+              _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(block->plane[leave_plane[a]][lane]), origin[a]), inverse[a]);
+          t_near = _mm256_max_ps(t0, t_near);  // as block_pair_candidates: the second operand for a NaN
+          t_far = _mm256_min_ps(t1, t_far);
+        }
+        t_near = _mm256_sub_ps(t_near, widening8(t_near));
+        t_far = _mm256_add_ps(t_far, widening8(t_far));
+        auto passed = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(t_near, t_far, _CMP_LE_OQ)));
+        if (passed == 0) continue;
+        alignas(32) float bound_of[8];
+        _mm256_store_ps(bound_of, bound);
+        do {
+          const auto ray_lane = static_cast<unsigned>(__builtin_ctz(passed));
+          passed &= passed - 1;
+          const std::uint32_t ray = slots[ray_lane];
+          double t_near_exact = range_.t_min, t_far_exact = s_.best_t[ray];
+          if (!clip_to_box(box_in_lane(*block, lane), PreparedRay(rays_[s_.ray_of[ray]]), t_near_exact,
+                           t_far_exact))
+            continue;
+          const auto box = static_cast<std::int32_t>(ids[done + lane]);
+          if constexpr (AnyHit) {
+            s_.best_t[ray] = t_near_exact;
+            s_.best_box[ray] = box;
+            s_.best_bound[ray] = bound_of[ray_lane] = minus_infinity;
+          } else if (t_near_exact < s_.best_t[ray] || s_.best_box[ray] == Hit::none || box < s_.best_box[ray]) {
+            s_.best_t[ray] = t_near_exact;
+            s_.best_box[ray] = box;
+            s_.best_bound[ray] = bound_of[ray_lane] = round_up<float>(t_near_exact);
+          }
+        } while (passed != 0);
+        bound = _mm256_load_ps(bound_of);
+      }
+    }
+  }
+#endif
+
+  /// The rays of an inner node's task split into its children's tasks, near last (traced next).
+  void split(const BoxNode& node, const StreamScratch::Task& task) {
     const std::size_t count = task.end - task.begin;
-    if (node.is_leaf()) {
-      at_leaf(node, task);
-      continue;
-    }
-    if (count < stream_min_rays) {
-      for (std::uint32_t e = task.begin; e < task.end; ++e)
-        walk_alone(s.slot[e], task.node, s.enter[e], s.exit[e]);
-      continue;
-    }
     // The far set goes to [top, top + count), the near set to [top + count + 8, ...): the entries
     // above this task's are free (its children and their subtrees are done), and 8 entries of
     // slack past each set take the whole-register stores of split_entries_avx.
     const std::size_t top = task.end;
-    reserve_entries(s, top + 2 * count + 32);
+    reserve_entries(s_, top + 2 * count + 32);
     const int axis = node.axis();
     const std::uint32_t left = task.node + 1, right = node.right_child();
-    const bool towards_negative = (negative >> axis) & 1u;
+    const bool towards_negative = (negative_ >> axis) & 1u;
     const std::uint32_t near = towards_negative ? right : left, far = towards_negative ? left : right;
-    const Split split{node.split(), s.origin.data() + axis * capacity, s.inverse.data() + axis * capacity,
-                      s.best_bound.data()};
+    const Split plane{node.split(), s_.origin.data() + axis * capacity_, s_.inverse.data() + axis * capacity_,
+                      s_.best_bound.data()};
     const std::size_t near_begin = top + count + 8;
     std::size_t far_end = top, near_end = near_begin;
     std::uint64_t visited;
 #if defined(KDSPACE_AVX2_DISPATCH)
     if constexpr (Wide)
-      visited = split_entries_avx(split, s.slot.data(), s.enter.data(), s.exit.data(), task.begin, task.end,
+      visited = split_entries_avx(plane, s_.slot.data(), s_.enter.data(), s_.exit.data(), task.begin, task.end,
                                   near_end, far_end);
     else
 #endif
-      visited = split_entries(split, s.slot.data(), s.enter.data(), s.exit.data(), task.begin, task.end,
+      visited = split_entries(plane, s_.slot.data(), s_.enter.data(), s_.exit.data(), task.begin, task.end,
                               near_end, far_end);
-    stats.nodes_visited += visited;
+    stats_.nodes_visited += visited;
     if (far_end > top)
-      s.tasks.push_back(StreamScratch::Task{far, static_cast<std::uint32_t>(top), static_cast<std::uint32_t>(far_end)});
+      s_.tasks.push_back(StreamScratch::Task{far, static_cast<std::uint32_t>(top), static_cast<std::uint32_t>(far_end)});
     if (near_end > near_begin)
-      s.tasks.push_back(StreamScratch::Task{near, static_cast<std::uint32_t>(near_begin),
-                                            static_cast<std::uint32_t>(near_end)});
+      s_.tasks.push_back(StreamScratch::Task{near, static_cast<std::uint32_t>(near_begin),
+                                             static_cast<std::uint32_t>(near_end)});
   }
 
-  for (std::size_t slot = 0; slot < m; ++slot) {
-    Hit h;
-    if (s.best_box[slot] != Hit::none) h = Hit{s.best_box[slot], to_float_t(s.best_t[slot])};
-    hits[ray_of[slot]] = h;
-  }
+  const BoxTree& tree_;
+  const BoxTreeView view_;
+  const Ray* rays_;
+  const RayRange range_;
+  RayStats& stats_;
+  StreamScratch& s_;
+  std::size_t capacity_ = 0;  ///< slots of the per-ray arrays (by axis: [axis * capacity_ + slot])
+  std::size_t count_ = 0;     ///< rays admitted
+  std::uint32_t negative_ = 0;  ///< bit a: the stream's rays run towards -a
+};
+
+template <bool AnyHit>
+void stream_baseline(const BoxTree& tree, const Ray* rays, const std::uint32_t* ids, std::size_t n, RayRange range,
+                     Hit* hits, RayStats& stats, StreamScratch& s) {
+  Stream<AnyHit, false>(tree, rays, range, stats, s).run(ids, n, hits);
 }
 
 #if defined(KDSPACE_AVX2_DISPATCH)
@@ -311,7 +490,7 @@ template <bool AnyHit>
 __attribute__((target("avx2"), flatten)) void stream_wide(const BoxTree& tree, const Ray* rays,
                                                           const std::uint32_t* ids, std::size_t n, RayRange range,
                                                           Hit* hits, RayStats& stats, StreamScratch& s) {
-  stream<AnyHit, true>(tree, rays, ids, n, range, hits, stats, s);
+  Stream<AnyHit, true>(tree, rays, range, stats, s).run(ids, n, hits);
 }
 #endif
 
@@ -320,10 +499,11 @@ __attribute__((target("avx2"), flatten)) void stream_wide(const BoxTree& tree, c
 template <bool AnyHit>
 void trace_stream(const BoxTree& tree, const Ray* rays, const std::uint32_t* ids, std::size_t n, RayRange range,
                   Hit* hits, RayStats& stats, StreamScratch& scratch) {
+  if (scratch.leaf_rays.size() < n + 8) scratch.leaf_rays.resize(n + 8);
 #if defined(KDSPACE_AVX2_DISPATCH)
   if (avx2_dispatch()) return stream_wide<AnyHit>(tree, rays, ids, n, range, hits, stats, scratch);
 #endif
-  stream<AnyHit, false>(tree, rays, ids, n, range, hits, stats, scratch);
+  stream_baseline<AnyHit>(tree, rays, ids, n, range, hits, stats, scratch);
 }
 
 template void trace_stream<false>(const BoxTree&, const Ray*, const std::uint32_t*, std::size_t, RayRange, Hit*,

@@ -15,10 +15,12 @@ namespace kdspace::detail {
 /// not allocate.
 struct StreamScratch {
   std::array<std::vector<std::uint32_t>, 8> octant;  ///< a batch's rays for the stream of each octant
+  std::vector<std::uint32_t> keys;                    ///< the direction signs of a batch's rays
   std::vector<float> origin, inverse;      ///< by axis, then by ray: [axis * capacity + ray]
   std::vector<double> best_t;              ///< per ray
   std::vector<float> best_bound;           ///< per ray: best_t rounded up; -inf once an any-hit ray is done
   std::vector<std::int32_t> best_box;      ///< per ray
+  std::vector<std::uint32_t> ray_of;       ///< per ray: its position in the batch
   std::vector<std::uint32_t> slot;         ///< per entry: the ray
   std::vector<float> enter, exit;          ///< per entry: the ray's interval in the entry's cell
   struct Task {
@@ -26,11 +28,12 @@ struct StreamScratch {
     std::uint32_t begin, end;  ///< its entries
   };
   std::vector<Task> tasks;
+  std::vector<std::uint32_t> leaf_rays;    ///< the rays entering a leaf (with 8 of slack)
 };
 
 /// The fewest rays a stream keeps together at a node; below it each ray walks the node's subtree
 /// alone (walk.hpp).
-inline constexpr std::size_t stream_min_rays = 8;
+inline constexpr std::size_t stream_min_rays = 4;
 
 /// Traces rays[ids[0 .. n)] through `tree` over `range`, writing hits[ids[i]] and adding to `stats`
 /// exactly what single traces would (hits and counts). The rays must all run the same way (the same

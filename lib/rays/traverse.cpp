@@ -79,10 +79,8 @@ struct BatchCheck {
   bool all_in_packet_range;
 };
 
-/// A batch checks every ray before it traces any. Bit operations over blocks of rays, without a
-/// branch a ray, make that cheap beside a camera ray's packet traversal (where the checks with
-/// branches cost a sixth of its instructions: callgrind).
-BatchCheck check_batch(const Ray* rays, std::size_t n) {
+/// check_batch one block of rays at a time, in the baseline instruction set.
+BatchCheck check_batch_scalar(const Ray* rays, std::size_t n) {
   using detail::power_of_two_bits;
   constexpr std::size_t block = 64;
   constexpr std::uint32_t exponent = 0x7f800000u, magnitude = 0x7fffffffu;
@@ -107,6 +105,71 @@ BatchCheck check_batch(const Ray* rays, std::size_t n) {
         if (!usable(rays[r])) return BatchCheck{r, false};
   }
   return BatchCheck{n, out_of_range == 0};
+}
+
+#if defined(KDSPACE_AVX2_DISPATCH)
+/// check_batch's tests on rays[0 .. 8 k) (the largest such k), eight rays (48 words, six registers)
+/// at a time: `bad` when some ray is not usable (then check_batch looks for it), `out_of_range` as
+/// in check_batch. Returns the rays it looked at.
+__attribute__((target("avx2"))) std::size_t check_batch_avx(const Ray* rays, std::size_t n, bool& bad,
+                                                            bool& out_of_range) {
+  using detail::power_of_two_bits;
+  const __m256i exponent = _mm256_set1_epi32(0x7f800000), magnitude = _mm256_set1_epi32(0x7fffffff);
+  const __m256i above = _mm256_set1_epi32(static_cast<int>(power_of_two_bits(62)));
+  const __m256i below = _mm256_set1_epi32(static_cast<int>(power_of_two_bits(-64)));
+  // Word w of a block is a direction component when w % 6 is 3, 4 or 5; the pattern repeats every
+  // three registers.
+  __m256i is_direction[3];
+  for (int j = 0; j < 3; ++j) {
+    alignas(32) std::int32_t lanes[8];
+    for (int l = 0; l < 8; ++l) lanes[l] = (8 * j + l) % 6 >= 3 ? -1 : 0;
+    is_direction[j] = _mm256_load_si256(reinterpret_cast<const __m256i*>(lanes));
+  }
+  // Bit 6 r + 3 of a block's 48-bit mask of zero words: ray r's first direction component.
+  constexpr std::uint64_t first_direction = 0x208208208208ull;
+  __m256i not_finite = _mm256_setzero_si256(), range = _mm256_setzero_si256();
+  std::uint64_t zero_direction = 0;
+  std::size_t done = 0;
+  for (; done + 8 <= n; done += 8) {
+    const auto* words = reinterpret_cast<const __m256i*>(rays + done);
+    std::uint64_t zero = 0;
+    for (int j = 0; j < 6; ++j) {
+      const __m256i w = _mm256_loadu_si256(words + j);
+      const __m256i m = _mm256_and_si256(w, magnitude);
+      not_finite = _mm256_or_si256(not_finite, _mm256_cmpeq_epi32(_mm256_and_si256(w, exponent), exponent));
+      // Magnitudes are below 2^31, so signed comparisons order them.
+      range = _mm256_or_si256(range, _mm256_cmpgt_epi32(m, above));
+      range = _mm256_or_si256(range, _mm256_and_si256(is_direction[j % 3], _mm256_cmpgt_epi32(below, m)));
+      const auto z = static_cast<std::uint32_t>(
+          _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(m, _mm256_setzero_si256()))));
+      zero |= static_cast<std::uint64_t>(z) << (8 * j);
+    }
+    zero_direction |= zero & zero >> 1 & zero >> 2 & first_direction;
+  }
+  bad = !_mm256_testz_si256(not_finite, not_finite) || zero_direction != 0;
+  out_of_range = !_mm256_testz_si256(range, range);
+  return done;
+}
+#endif
+
+/// A batch checks every ray before it traces any. Bit operations over blocks of rays, without a
+/// branch a ray, make that cheap beside a camera ray's packet traversal (where the checks with
+/// branches cost a sixth of its instructions: callgrind).
+BatchCheck check_batch(const Ray* rays, std::size_t n) {
+#if defined(KDSPACE_AVX2_DISPATCH)
+  if (detail::avx2_dispatch()) {
+    bool bad = false, out_of_range = false;
+    const std::size_t done = check_batch_avx(rays, n, bad, out_of_range);
+    if (bad) {
+      for (std::size_t r = 0; r < done; ++r)
+        if (!usable(rays[r])) return BatchCheck{r, false};
+    }
+    const BatchCheck rest = check_batch_scalar(rays + done, n - done);
+    if (rest.first_unusable < n - done) return BatchCheck{done + rest.first_unusable, false};
+    return BatchCheck{n, !out_of_range && rest.all_in_packet_range};
+  }
+#endif
+  return check_batch_scalar(rays, n);
 }
 
 /// detail::packet_key of a ray whose components are all in the packet range (BatchCheck): its signs.
@@ -229,14 +292,10 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
           : std::clamp<std::size_t>((n / (4 * workers) + 7) / 8 * 8, 256, max_stream_chunk);
   std::vector<detail::StreamScratch> scratch(streams ? workers : 0);
   // Traces rays[begin, end) on `worker`'s behalf, adding to `local`.
-  const auto trace_range = [&](std::size_t begin, std::size_t end, unsigned worker, RayStats& local) {
-    std::array<std::vector<std::uint32_t>, 8>* octant = streams ? &scratch[worker].octant : nullptr;
+  const auto trace_range = [&](std::size_t begin, std::size_t end, RayStats& local) {
     const auto trace_four = [&](std::size_t first, bool together) {
       if (together) {
         trace_packet<AnyHit>(rays + first, 4, range, hits.data() + first, local);
-      } else if (streams) {
-        for (std::size_t k = first; k < first + 4; ++k)
-          (*octant)[sign_key(rays[k])].push_back(static_cast<std::uint32_t>(k));
       } else {
         for (std::size_t k = first; k < first + 4; ++k) hits[k] = trace_one(rays[k], local);
       }
@@ -271,20 +330,62 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
       i += 4;
     }
     for (; i < end; ++i) hits[i] = trace_one(rays[i], local);
-    if (streams)
-      for (std::vector<std::uint32_t>& ids : *octant) {
-        if (!ids.empty())
-          detail::trace_stream<AnyHit>(*this, rays, ids.data(), ids.size(), range, hits.data(), local,
-                                       scratch[worker]);
-        ids.clear();
+  };
+  // The same with streams: the rays of a packet as above, every other ray into its octant's stream.
+  const auto stream_range = [&](std::size_t begin, std::size_t end, unsigned worker, RayStats& local) {
+    detail::StreamScratch& s = scratch[worker];
+    const std::size_t count = end - begin;
+    if (s.keys.size() < count) s.keys.resize(count);
+    for (std::vector<std::uint32_t>& ids : s.octant)
+      if (ids.size() < count) ids.resize(count);
+    std::uint32_t* key = s.keys.data();
+    for (std::size_t k = 0; k < count; ++k) key[k] = sign_key(rays[begin + k]);
+    std::array<std::size_t, 8> held{};
+    const auto to_stream = [&](std::size_t first, std::size_t last) {
+      for (std::size_t k = first; k < last; ++k) {
+        const std::uint32_t o = key[k - begin];
+        s.octant[o][held[o]++] = static_cast<std::uint32_t>(k);
       }
+    };
+    const auto alike_four = [&](std::size_t first) {
+      const std::uint32_t* k = key + (first - begin);
+      return ((k[0] ^ k[1]) | (k[0] ^ k[2]) | (k[0] ^ k[3])) == 0;
+    };
+    std::size_t i = begin;
+    for (; i + 8 <= end; i += 8) {
+      const bool first = alike_four(i), second = alike_four(i + 4);
+      if (wide_packets && first && second && key[i - begin] == key[i + 4 - begin]) {
+        trace_packet<AnyHit>(rays + i, 8, range, hits.data() + i, local);
+        continue;
+      }
+      if (first)
+        trace_packet<AnyHit>(rays + i, 4, range, hits.data() + i, local);
+      else
+        to_stream(i, i + 4);
+      if (second)
+        trace_packet<AnyHit>(rays + i + 4, 4, range, hits.data() + i + 4, local);
+      else
+        to_stream(i + 4, i + 8);
+    }
+    if (i + 4 <= end && alike_four(i)) {
+      trace_packet<AnyHit>(rays + i, 4, range, hits.data() + i, local);
+      i += 4;
+    }
+    to_stream(i, end);
+    for (std::size_t o = 0; o < 8; ++o)
+      if (held[o] > 0)
+        detail::trace_stream<AnyHit>(*this, rays, s.octant[o].data(), held[o], range, hits.data(), local, s);
   };
   detail::parallel_for(n, workers, chunk, [&](std::size_t begin, std::size_t end, unsigned worker) {
     RayStats local;
     // One worker is handed the whole batch: it too goes chunk by chunk, so that a stream's rays stay
     // in the cache.
-    for (std::size_t first = begin; first < end; first += chunk)
-      trace_range(first, std::min(end, first + chunk), worker, local);
+    for (std::size_t first = begin; first < end; first += chunk) {
+      if (streams)
+        stream_range(first, std::min(end, first + chunk), worker, local);
+      else
+        trace_range(first, std::min(end, first + chunk), local);
+    }
     per_worker[worker] += local;
   });
   if (stats)
