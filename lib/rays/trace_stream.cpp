@@ -352,10 +352,10 @@ class Stream {
     if (leaf.count() == 0 || n == 0) return;
     std::size_t i = 0;
 #if defined(KDSPACE_AVX2_DISPATCH)
-    // Whole groups of eight rays box by box; the rest one by one (a group of a few rays costs as
-    // much as a full one).
+    // Groups of eight rays box by box, the last one too if it holds enough of them (a group of a
+    // few rays costs as much as a full one); the rest one by one.
     if constexpr (Wide)
-      for (; i + 8 <= n; i += 8) leaf_by_boxes(leaf, entering + i);
+      for (; i + group_min_rays <= n; i += 8) leaf_by_boxes(leaf, entering + i, std::min<std::size_t>(8, n - i));
 #endif
     for (; i < n; ++i) {
       const std::uint32_t slot = entering[i];
@@ -368,28 +368,37 @@ class Stream {
   }
 
 #if defined(KDSPACE_AVX2_DISPATCH)
-  /// test_leaf for the eight rays slots[0 .. 8), all of them against one box at a time: for each
+  /// test_leaf for the rays slots[0 .. rays) (at most 8), all of them against one box at a time: for each
   /// ray the same float filter (block_pair_candidates' operations in its order) and the same double
   /// test, box after box in the leaf's order. A ray's bound drops as its best hit does, so a box is
   /// filtered with the bound its predecessors left (never tighter than its double test, which
   /// decides alone), and an any-hit ray stops at the first box it hits.
-  __attribute__((target("avx2"))) void leaf_by_boxes(const BoxNode& leaf, const std::uint32_t* slots) {
+  /// The fewest rays leaf_by_boxes takes (of its eight lanes).
+  static constexpr std::size_t group_min_rays = 5;
+
+  __attribute__((target("avx2"))) void leaf_by_boxes(const BoxNode& leaf, const std::uint32_t* slots,
+                                                     std::size_t rays) {
     const std::uint32_t count = leaf.count();
-    stats_.boxes_tested += static_cast<std::uint64_t>(count) * 8;
+    stats_.boxes_tested += static_cast<std::uint64_t>(count) * rays;
+    // Lanes past `rays` read slots[rays ..] (the leaf ray array has 8 of slack), taken as slot 0, and
+    // are closed: bound -inf, so that the filter's far end is NaN and no box passes.
+    const __m256i valid =
+        _mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(rays)), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
     int enter_plane[3], leave_plane[3];
     for (int a = 0; a < 3; ++a) {
       const int negative = static_cast<int>((negative_ >> a) & 1u);
       enter_plane[a] = a + 3 * negative;
       leave_plane[a] = a + 3 - 3 * negative;
     }
-    const __m256i slot = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots));
+    const __m256i slot = _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(slots)), valid);
     __m256 origin[3], inverse[3];
     for (int a = 0; a < 3; ++a) {
       origin[a] = _mm256_i32gather_ps(s_.origin.data() + a * capacity_, slot, 4);
       inverse[a] = _mm256_i32gather_ps(s_.inverse.data() + a * capacity_, slot, 4);
     }
     const __m256 t_low = _mm256_set1_ps(range_.t_min);
-    __m256 bound = _mm256_i32gather_ps(s_.best_bound.data(), slot, 4);
+    __m256 bound = _mm256_blendv_ps(_mm256_set1_ps(minus_infinity), _mm256_i32gather_ps(s_.best_bound.data(), slot, 4),
+                                    _mm256_castsi256_ps(valid));
     const LeafBlock* block = view_.blocks + leaf.first() / 4;
     const std::uint32_t* ids = view_.references + leaf.first();
     for (std::uint32_t done = 0; done < count; done += 4, ++block) {

@@ -1,7 +1,6 @@
 // Ray streams: many incoherent rays through the BoxTree together (trace_stream.cpp).
 #pragma once
 
-#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -14,8 +13,8 @@ namespace kdspace::detail {
 /// Working memory of trace_stream, kept between calls by a batch's worker so that its streams do
 /// not allocate.
 struct StreamScratch {
-  std::array<std::vector<std::uint32_t>, 8> octant;  ///< a batch's rays for the stream of each octant
-  std::vector<std::uint32_t> keys;                    ///< the direction signs of a batch's rays
+  std::vector<std::uint32_t> keys;         ///< per ray of a batch's chunk: its direction's signs
+  std::vector<std::uint32_t> ids;          ///< the chunk's rays for the streams, octant after octant
   std::vector<float> origin, inverse;      ///< by axis, then by ray: [axis * capacity + ray]
   std::vector<double> best_t;              ///< per ray
   std::vector<float> best_bound;           ///< per ray: best_t rounded up; -inf once an any-hit ray is done

@@ -335,46 +335,47 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
   const auto stream_range = [&](std::size_t begin, std::size_t end, unsigned worker, RayStats& local) {
     detail::StreamScratch& s = scratch[worker];
     const std::size_t count = end - begin;
-    if (s.keys.size() < count) s.keys.resize(count);
-    for (std::vector<std::uint32_t>& ids : s.octant)
-      if (ids.size() < count) ids.resize(count);
+    if (s.keys.size() < count) {
+      s.keys.resize(count);
+      s.ids.resize(count);
+    }
+    // A ray's key: its direction's signs, or 8 once it has gone in a packet.
     std::uint32_t* key = s.keys.data();
     for (std::size_t k = 0; k < count; ++k) key[k] = sign_key(rays[begin + k]);
-    std::array<std::size_t, 8> held{};
-    const auto to_stream = [&](std::size_t first, std::size_t last) {
-      for (std::size_t k = first; k < last; ++k) {
-        const std::uint32_t o = key[k - begin];
-        s.octant[o][held[o]++] = static_cast<std::uint32_t>(k);
-      }
-    };
     const auto alike_four = [&](std::size_t first) {
       const std::uint32_t* k = key + (first - begin);
       return ((k[0] ^ k[1]) | (k[0] ^ k[2]) | (k[0] ^ k[3])) == 0;
+    };
+    // Mostly coherent rays (a camera's) trace their few odd rays one by one as they come, beside the
+    // packets that walked the same cells just before: a stream would meet them cold.
+    std::size_t alike = 0;
+    for (std::size_t first = begin; first + 4 <= end; first += 4) alike += alike_four(first) ? 4 : 0;
+    if (2 * alike >= count) return trace_range(begin, end, local);
+    const auto packet = [&](std::size_t first, int width) {
+      trace_packet<AnyHit>(rays + first, width, range, hits.data() + first, local);
+      for (int l = 0; l < width; ++l) key[first - begin + static_cast<std::size_t>(l)] = 8;
     };
     std::size_t i = begin;
     for (; i + 8 <= end; i += 8) {
       const bool first = alike_four(i), second = alike_four(i + 4);
       if (wide_packets && first && second && key[i - begin] == key[i + 4 - begin]) {
-        trace_packet<AnyHit>(rays + i, 8, range, hits.data() + i, local);
+        packet(i, 8);
         continue;
       }
-      if (first)
-        trace_packet<AnyHit>(rays + i, 4, range, hits.data() + i, local);
-      else
-        to_stream(i, i + 4);
-      if (second)
-        trace_packet<AnyHit>(rays + i + 4, 4, range, hits.data() + i + 4, local);
-      else
-        to_stream(i + 4, i + 8);
+      if (first) packet(i, 4);
+      if (second) packet(i + 4, 4);
     }
-    if (i + 4 <= end && alike_four(i)) {
-      trace_packet<AnyHit>(rays + i, 4, range, hits.data() + i, local);
-      i += 4;
-    }
-    to_stream(i, end);
+    if (i + 4 <= end && alike_four(i)) packet(i, 4);
+    // The other rays by octant (a counting sort: ascending within an octant), one stream each.
+    std::array<std::size_t, 10> start{};
+    for (std::size_t k = 0; k < count; ++k) ++start[key[k] + 2];
+    for (std::size_t o = 2; o < 10; ++o) start[o] += start[o - 1];
+    std::uint32_t* ids = s.ids.data();
+    for (std::size_t k = 0; k < count; ++k) ids[start[key[k] + 1]++] = static_cast<std::uint32_t>(begin + k);
     for (std::size_t o = 0; o < 8; ++o)
-      if (held[o] > 0)
-        detail::trace_stream<AnyHit>(*this, rays, s.octant[o].data(), held[o], range, hits.data(), local, s);
+      if (start[o + 1] > start[o])
+        detail::trace_stream<AnyHit>(*this, rays, ids + start[o], start[o + 1] - start[o], range, hits.data(), local,
+                                     s);
   };
   detail::parallel_for(n, workers, chunk, [&](std::size_t begin, std::size_t end, unsigned worker) {
     RayStats local;
