@@ -608,6 +608,79 @@ TEST_CASE("rays: batches with rays that cannot join a packet give the hits of si
   }
 }
 
+TEST_CASE("rays: streams of incoherent rays give the hits and stats of single rays", "[rays]") {
+  // Random rays form no packets: a batch sends them through the tree in streams, one a direction
+  // octant (lib/rays/trace_stream.cpp), thousands of rays a stream here, so that sets split at many
+  // nodes, leaves see groups of eight rays and stragglers walk alone. Lattice rays (integer origins,
+  // directions +-1, +-2, +-0.5: no zero component, so they stream too) meet faces, edges, corners
+  // and split planes exactly, and boxes sharing faces give ties at equal t.
+  Rng rng(31);
+  const auto lattice_without_zeros = [&rng](std::size_t m, int lo, int hi) {
+    std::vector<Ray> rays = lattice_rays(m, lo, hi, rng);
+    for (Ray& r : rays)
+      for (int a = 0; a < 3; ++a)
+        if (r.direction[a] == 0) r.direction[a] = uniform_int(rng, 0, 1) ? 1.0f : -0.5f;
+    return rays;
+  };
+  std::vector<std::vector<Box3f>> scenes = {kdspace::generate_boxes(20000, kdspace::SceneKind::clustered, 31),
+                                            mixed_scale_boxes(5000, rng),
+                                            overlapping_boxes(1500, rng),
+                                            flat_boxes(3000, rng),
+                                            integer_boxes(3000, rng),
+                                            cube_lattice(rng),
+                                            std::vector<Box3f>(500, box_of(1, 2, 3, 2, 4, 4))};
+  for (std::size_t scene = 0; scene < scenes.size(); ++scene) {
+    const std::vector<Box3f>& boxes = scenes[scene];
+    const Box3f bounds = bounds_of(boxes);
+    std::vector<Ray> rays = random_rays(12000, bounds, rng);
+    const std::vector<Ray> inside = inside_rays(3000, boxes, rng);
+    const std::vector<Ray> lattice = lattice_without_zeros(6000, -1, 13);
+    rays.insert(rays.end(), inside.begin(), inside.end());
+    rays.insert(rays.end(), lattice.begin(), lattice.end());
+    // Grazing rays: aimed at a corner of a box, or at the middle of one of its edges, so that whether
+    // they touch it is decided within rounding (the float filters' widening at work).
+    for (const Ray& from : random_rays(4000, bounds, rng)) {
+      const Box3f& b = boxes[static_cast<std::size_t>(uniform_int(rng, 0, static_cast<int>(boxes.size()) - 1))];
+      const int corner = uniform_int(rng, 0, 7), edge_axis = uniform_int(rng, -1, 2);
+      Ray r = from;
+      for (int a = 0; a < 3; ++a) {
+        const float target = a == edge_axis ? 0.5f * (b.lo[a] + b.hi[a]) : (corner >> a & 1) ? b.hi[a] : b.lo[a];
+        r.direction[a] = target - r.origin[a];
+        if (r.direction[a] == 0) r.direction[a] = 0x1p-20f;
+      }
+      rays.push_back(r);
+    }
+    const BoxTree tree(boxes);
+    for (const kdspace::RayRange range : {kdspace::RayRange{}, kdspace::RayRange{0.25f, 3}}) {
+      RayStats single_stats, single_any_stats;
+      std::vector<Hit> single_closest, single_any;
+      for (const Ray& r : rays) {
+        single_closest.push_back(tree.closest_hit(r, range.t_min, range.t_max, &single_stats));
+        single_any.push_back(tree.any_hit(r, range.t_min, range.t_max, &single_any_stats));
+      }
+      for (const unsigned threads : scene == 0 ? std::vector<unsigned>{1, 2} : std::vector<unsigned>{1}) {
+        INFO("scene " << scene << ", range [" << range.t_min << ", " << range.t_max << "], " << threads
+                      << " threads");
+        RayStats stats, any_stats;
+        const std::vector<Hit> closest = tree.closest_hit_batch(rays, range, threads, &stats);
+        const std::vector<Hit> any = tree.any_hit_batch(rays, range, threads, &any_stats);
+        for (std::size_t i = 0; i < rays.size(); ++i) {
+          INFO("ray " << i << ": " << describe(rays[i]));
+          REQUIRE(closest[i].box == single_closest[i].box);
+          REQUIRE(closest[i].t == single_closest[i].t);
+          REQUIRE(any[i].box == single_any[i].box);
+          REQUIRE(any[i].t == single_any[i].t);
+        }
+        CHECK(stats.rays == single_stats.rays);
+        CHECK(stats.nodes_visited == single_stats.nodes_visited);
+        CHECK(stats.boxes_tested == single_stats.boxes_tested);
+        CHECK(any_stats.nodes_visited == single_any_stats.nodes_visited);
+        CHECK(any_stats.boxes_tested == single_any_stats.boxes_tested);
+      }
+    }
+  }
+}
+
 TEST_CASE("rays: batches over a range give the hits of single rays over it", "[rays]") {
   Rng rng(25);
   const std::vector<Box3f> boxes = kdspace::generate_boxes(2000, kdspace::SceneKind::clustered, 25);
