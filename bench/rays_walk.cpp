@@ -2,11 +2,13 @@
 // (valgrind --tool=callgrind --branch-sim=yes --toggle-collect='*trace_batch*').
 //
 //   rays_walk MESH_FILE|uniform|clustered [--boxes N] [--rays M] [--primary WxH] [--any-hit] [--reps R]
+//             [--voxels R] [--ki K] [--bonus B]
 //
-// Builds the default tree over a mesh's triangle boxes (bench/real_data/mesh_io.hpp formats) or over
-// N generated boxes (default 1e5), makes M random rays (default 1e5; kdspace::random_rays, seed 2,
-// as kdspace-rays-bench) and traces them R times (default 1) with closest_hit_batch (or
-// any_hit_batch) on one thread. With --primary, the camera rays of a WxH image instead
+// Builds the default tree (with --ki / --bonus: that K_i / empty-space bonus) over a mesh's triangle
+// boxes (bench/real_data/mesh_io.hpp formats), its surface voxels on a grid of R cells along its
+// longest side (--voxels R, as kdspace-rays-bench) or N generated boxes (default 1e5), makes M
+// random rays (default 1e5; kdspace::random_rays, seed 2, as kdspace-rays-bench) and traces them R
+// times (default 1) with closest_hit_batch (or any_hit_batch) on one thread. With --primary, the camera rays of a WxH image instead
 // (kdspace::fit_camera, as kdspace-rays-bench; traced in packets). Prints the hits, the nodes and boxes per
 // ray, and the trace's CPU time per ray.
 #include <cstdio>
@@ -35,13 +37,14 @@ int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
                  "usage: rays_walk MESH_FILE|uniform|clustered [--boxes N] [--rays M] [--primary WxH] "
-                 "[--any-hit] [--reps R]\n");
+                 "[--any-hit] [--reps R] [--voxels R] [--ki K] [--bonus B]\n");
     return 2;
   }
   const std::string scene = argv[1];
   std::size_t n = 100000, m = 100000, reps = 1;
   bool any = false;
   BoxBuildParams params;
+  std::size_t voxels = 0;
   std::size_t width = 0, height = 0;
   for (int i = 2; i < argc; ++i) {
     const std::string arg = argv[i];
@@ -56,6 +59,8 @@ int main(int argc, char** argv) {
       ++i;
     else if (arg == "--any-hit")
       any = true;
+    else if (arg == "--voxels" && i + 1 < argc)
+      voxels = std::strtoull(argv[++i], nullptr, 10);
     else if (arg == "--ki" && i + 1 < argc)
       params.K_i = std::strtof(argv[++i], nullptr);
     else if (arg == "--bonus" && i + 1 < argc)
@@ -70,6 +75,8 @@ int main(int argc, char** argv) {
     boxes = generate_boxes(n, SceneKind::uniform, 1);
   else if (scene == "clustered")
     boxes = generate_boxes(n, SceneKind::clustered, 1);
+  else if (voxels > 0)
+    boxes = bench::surface_voxels(bench::read_mesh(scene), voxels);
   else
     boxes = bench::triangle_boxes(bench::read_mesh(scene));
   const BoxTree tree(boxes, params);

@@ -350,10 +350,17 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
     // packets that walked the same cells just before: a stream would meet them cold.
     std::size_t alike = 0;
     for (std::size_t first = begin; first + 4 <= end; first += 4) alike += alike_four(first) ? 4 : 0;
-    if (2 * alike >= count) return trace_range(begin, end, local);
+    const bool coherent = 2 * alike >= count;
     const auto packet = [&](std::size_t first, int width) {
       trace_packet<AnyHit>(rays + first, width, range, hits.data() + first, local);
       for (int l = 0; l < width; ++l) key[first - begin + static_cast<std::size_t>(l)] = 8;
+    };
+    const auto odd = [&](std::size_t first, std::size_t last) {  // rays that form no packet
+      if (!coherent) return;  // they go in the streams
+      for (std::size_t k = first; k < last; ++k) {
+        hits[k] = trace_one(rays[k], local);
+        key[k - begin] = 8;
+      }
     };
     std::size_t i = begin;
     for (; i + 8 <= end; i += 8) {
@@ -362,10 +369,15 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
         packet(i, 8);
         continue;
       }
-      if (first) packet(i, 4);
-      if (second) packet(i + 4, 4);
+      if (first) packet(i, 4); else odd(i, i + 4);
+      if (second) packet(i + 4, 4); else odd(i + 4, i + 8);
     }
-    if (i + 4 <= end && alike_four(i)) packet(i, 4);
+    if (i + 4 <= end && alike_four(i)) {
+      packet(i, 4);
+      i += 4;
+    }
+    odd(i, end);
+    if (coherent) return;
     // The other rays by octant (a counting sort: ascending within an octant), one stream each.
     std::array<std::size_t, 10> start{};
     for (std::size_t k = 0; k < count; ++k) ++start[key[k] + 2];
