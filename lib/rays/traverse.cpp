@@ -378,10 +378,11 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
     }
     odd(i, end);
     if (coherent) return;
-    // The other rays by octant (a counting sort: ascending within an octant), one stream each.
-    std::array<std::size_t, 10> start{};
+    // The other rays by octant (a counting sort over the keys 0 .. 8: ascending within an octant,
+    // the rays already traced last), one stream an octant.
+    std::array<std::size_t, 11> start{};
     for (std::size_t k = 0; k < count; ++k) ++start[key[k] + 2];
-    for (std::size_t o = 2; o < 10; ++o) start[o] += start[o - 1];
+    for (std::size_t o = 2; o < start.size(); ++o) start[o] += start[o - 1];
     std::uint32_t* ids = s.ids.data();
     for (std::size_t k = 0; k < count; ++k) ids[start[key[k] + 1]++] = static_cast<std::uint32_t>(begin + k);
     for (std::size_t o = 0; o < 8; ++o)
