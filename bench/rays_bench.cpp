@@ -5,7 +5,8 @@
 //   kdspace          BoxTree with the default build (sah_nlogn, one thread); closest_hit_batch for
 //                    closest hits, any_hit_batch over [1e-4, 1] for shadow rays. The batches trace
 //                    eight rays at a time (AVX2; else four) where neighbours' directions share their
-//                    signs (packets: camera and shadow rays mostly), the other rays one by one.
+//                    signs (packets: camera and shadow rays mostly), the other rays in streams of
+//                    one direction octant each (lib/rays/trace_stream.cpp: random rays).
 //   embree-user-Q    Embree user geometry (RTC_GEOMETRY_TYPE_USER), one primitive per box: the bounds
 //                    callback returns the box, the intersect callback runs kdspace's closed slab test
 //                    (double precision from the float data, t rounded to float; a ray starting inside
@@ -1160,7 +1161,7 @@ int main(int argc, char** argv) {
               rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_VERSION_PATCH));
   std::printf(
       "kdspace: BoxTree default build (sah_nlogn, 1 thread), closest_hit_batch and any_hit_batch (packets of "
-      "8 coherent rays with AVX2, else 4). Embree: "
+      "8 coherent rays with AVX2, else 4; the other rays in streams, one a direction octant). Embree: "
       "device \"threads=1\" (builds on 1 thread; tasking %s; backface culling %s), rtcIntersect1 / "
       "rtcOccluded1 "
       "per ray; user geometry = boxes with kdspace's slab test in the callbacks; tri = 12 triangles per box. "
