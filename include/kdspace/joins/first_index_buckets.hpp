@@ -11,6 +11,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "kdspace/detail/huge_pages.hpp"
+
 namespace kdspace::detail {
 
 template <class Record>
@@ -79,7 +81,7 @@ std::vector<Record> sort_by_first_index(std::vector<FirstIndexBuckets<Record>>& 
   std::size_t total = 0;
   for (auto& set : sets)
     for (std::size_t k = 0; k < set.bucket_count(); ++k) total += set.bucket(k).size();
-  sorted.reserve(total);
+  reserve_in_huge_pages(sorted, total);
   const unsigned shift = sets.front().shift();
   const std::size_t width = std::size_t{1} << shift;
   std::vector<std::size_t> next(width + 1);

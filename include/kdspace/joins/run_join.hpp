@@ -12,6 +12,7 @@
 #include <limits>
 #include <vector>
 
+#include "kdspace/detail/huge_pages.hpp"
 #include "kdspace/index_pair.hpp"
 #include "kdspace/joins/bounded_tree.hpp"
 #include "kdspace/joins/count_rule.hpp"
@@ -56,8 +57,11 @@ NeighborLists<T> knn_join_trees(const BoundedTree<T, Dim>& queries, const Bounde
     DualTraversal<Rule>(rule, task_stats).run(root, 0, {});
   });
   NeighborLists<T> out;
+  // Large results in huge pages where enabled: the rows are written out of order.
+  reserve_in_huge_pages(out.offsets, queries.size() + 1);
   out.offsets.resize(queries.size() + 1);
   for (std::size_t q = 0; q <= queries.size(); ++q) out.offsets[q] = q * k;
+  reserve_in_huge_pages(out.neighbors, queries.size() * k);
   out.neighbors.resize(queries.size() * k);
   for (std::size_t pos = 0; pos < queries.size(); ++pos) {
     const Candidate<T>* sorted = table.sorted_row(pos);

@@ -27,6 +27,7 @@
 #include <utility>
 #include <vector>
 
+#include "kdspace/detail/huge_pages.hpp"
 #include "kdspace/detail/storage.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/metric.hpp"
@@ -105,13 +106,14 @@ class PointTree {
     if (Dim != Dynamic && other.dim() != static_cast<std::size_t>(Dim))
       throw Error("tree of dimension " + std::to_string(other.dim()) + " copied into a tree of dimension " +
                   std::to_string(Dim));
-    std::vector<Node> nodes;
+    detail::HugePageVector<Node> nodes;
     nodes.reserve(other.nodes_.size());
     for (const auto& node : other.nodes_)
       nodes.push_back(Node{static_cast<T>(node.left_max), static_cast<T>(node.right_min), node.link, node.info});
-    points_ = detail::Storage<T>(std::vector<T>(other.points_.begin(), other.points_.end()));
-    order_ = detail::Storage<std::uint32_t>(std::vector<std::uint32_t>(other.order_.begin(), other.order_.end()));
-    nodes_ = detail::Storage<Node>(std::move(nodes));
+    points_ = detail::Storage<T>::owning(detail::HugePageVector<T>(other.points_.begin(), other.points_.end()));
+    order_ = detail::Storage<std::uint32_t>::owning(
+        detail::HugePageVector<std::uint32_t>(other.order_.begin(), other.order_.end()));
+    nodes_ = detail::Storage<Node>::owning(std::move(nodes));
     params_ = other.params_;
     root_lo_.assign(other.root_lo_.begin(), other.root_lo_.end());
     root_hi_.assign(other.root_hi_.begin(), other.root_hi_.end());
@@ -226,7 +228,10 @@ class PointTree {
     check_queries(queries, nq);
     NeighborLists<T> out;
     // Offsets 0, k, 2k, ... (grown by push_back: GCC 12 warns falsely on a resize here, -Warray-bounds).
+    // Large results in huge pages where enabled: the rows are written out of order.
+    detail::reserve_in_huge_pages(out.offsets, nq + 1);
     for (std::size_t q = 1; q <= nq; ++q) out.offsets.push_back(q * k);
+    detail::reserve_in_huge_pages(out.neighbors, nq * k);
     out.neighbors.resize(nq * k);
     std::vector<QueryStats> per_worker(detail::resolve_threads(threads));
     auto by_tree = [&](std::size_t first, std::size_t last) {
@@ -365,9 +370,9 @@ class PointTree {
       return Builder(rows, n, d, params).build(root_lo_.data(), root_hi_.data());
     });
     built.nodes.shrink_to_fit();
-    nodes_ = detail::Storage<Node>(std::move(built.nodes));
-    points_ = detail::Storage<T>(std::move(built.points));
-    order_ = detail::Storage<std::uint32_t>(std::move(built.order));
+    nodes_ = detail::Storage<Node>::owning(std::move(built.nodes));
+    points_ = detail::Storage<T>::owning(std::move(built.points));
+    order_ = detail::Storage<std::uint32_t>::owning(std::move(built.order));
     params_ = params;
     depth_ = built.depth;
     leaves_ = built.leaves;

@@ -9,6 +9,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "kdspace/detail/huge_pages.hpp"
 #include "kdspace/points/detail/node.hpp"
 #include "kdspace/points/detail/parallel.hpp"
 #include "kdspace/points/detail/row_bounds.hpp"
@@ -19,9 +20,10 @@ namespace kdspace::detail {
 
 template <class T>
 struct BuiltTree {
-  std::vector<PointNode<T>> nodes;
-  std::vector<T> points;             ///< the points in leaf order, row-major
-  std::vector<std::uint32_t> order;  ///< original index of each point, in leaf order
+  // In huge pages where enabled (detail/huge_pages.hpp), as the buffers below.
+  HugePageVector<PointNode<T>> nodes;
+  HugePageVector<T> points;             ///< the points in leaf order, row-major
+  HugePageVector<std::uint32_t> order;  ///< original index of each point, in leaf order
   std::size_t depth = 0;             ///< depth of the deepest leaf (a lone root leaf has depth 0)
   std::size_t leaves = 0;
 };
@@ -187,8 +189,8 @@ class RowBuffers {
   std::size_t n_;
   std::size_t dim_;
   Buffer buffers_[2] = {};
-  std::vector<T> spare_points_;
-  std::vector<std::uint32_t> spare_order_;
+  HugePageVector<T> spare_points_;
+  HugePageVector<std::uint32_t> spare_order_;
 };
 
 /// Splits nodes recursively. Every node's points are contiguous rows [begin, end) of a buffer. A
@@ -239,7 +241,7 @@ class Builder : RowBuffers<T, Dim> {
 
  private:
   struct Subtree {
-    std::vector<PointNode<T>> nodes;  // links of inner nodes are relative to nodes[0]
+    HugePageVector<PointNode<T>> nodes;  // links of inner nodes are relative to nodes[0]
     std::size_t depth = 0;
   };
   /// What one thread's recursion works in: the cell (narrowed on the way down, restored on the way
@@ -323,7 +325,7 @@ class Builder : RowBuffers<T, Dim> {
   }
 
   BuildParams params_;
-  mutable std::vector<T> keys_;  // the median rule's selection scratch, rows [begin, end) for the node there
+  mutable HugePageVector<T> keys_;  // the median rule's selection scratch, rows [begin, end) for the node there
 };
 
 }  // namespace kdspace::detail

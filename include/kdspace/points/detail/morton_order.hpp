@@ -16,6 +16,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "kdspace/detail/huge_pages.hpp"
+
 namespace kdspace::detail {
 
 /// Dimensions up to this get a Z-order key of at least 4 bits an axis in 32 bits.
@@ -55,7 +57,7 @@ std::vector<std::size_t> morton_order(const T* rows, std::size_t first, std::siz
     const double extent = static_cast<double>(hi[a]) - static_cast<double>(lo[a]);
     scale[a] = extent > 0 ? cells / extent : 0;
   }
-  std::vector<std::uint64_t> keyed(count), sorted(count);  // Z-order key, then the row's offset
+  HugePageVector<std::uint64_t> keyed(count), sorted(count);  // Z-order key, then the row's offset
   for (std::size_t i = 0; i < count; ++i) {
     const T* x = rows + (first + i) * dim;
     std::uint32_t key = 0;
