@@ -413,9 +413,10 @@ TEST_CASE("joins: a k-NN table keeps the first k offers in (distance, index) ord
   for (std::size_t k = 1; k <= 40; ++k) {  // sorted rows up to 32, heaps beyond
     for (int trial = 0; trial < 10; ++trial) {
       // Seven rows offered interleaved (largest_kth takes four rows at a time), distances from few
-      // values so that many tie on distance.
+      // values so that many tie on distance; at the end the rows move to the places of a shuffle.
       const std::size_t rows = 7, offers = k + rng() % 50;
-      KnnTable<double> table(rows, k);
+      std::vector<Neighbor<double>> result(rows * k, KnnTable<double>::placeholder());
+      KnnTable<double> table(result.data(), rows, k);
       std::vector<std::vector<Candidate<double>>> offered(rows);
       std::vector<std::uint32_t> index(300);
       std::iota(index.begin(), index.end(), 0u);
@@ -434,16 +435,22 @@ TEST_CASE("joins: a k-NN table keeps the first k offers in (distance, index) ord
       }
       double largest = 0;
       for (std::size_t row = 0; row < rows; ++row) {
+        largest = std::max(largest, table.kth(row));
+        REQUIRE(table.largest_kth(0, row + 1) == largest);
+      }
+      std::vector<std::uint32_t> result_row(rows);
+      std::iota(result_row.begin(), result_row.end(), 0u);
+      std::shuffle(result_row.begin(), result_row.end(), rng);
+      table.finish<kdspace::L2>(result_row.data());  // rows in order, true distances, moved
+      for (std::size_t row = 0; row < rows; ++row) {
         std::vector<Candidate<double>> want = offered[row];
         std::sort(want.begin(), want.end(), kdspace::detail::ComesBefore{});
         want.resize(k, Candidate<double>{inf, std::numeric_limits<std::uint32_t>::max()});
-        largest = std::max(largest, table.kth(row));
-        REQUIRE(table.largest_kth(0, row + 1) == largest);
-        const Candidate<double>* got = table.sorted_row(row);
+        const Neighbor<double>* got = result.data() + result_row[row] * k;
         for (std::size_t i = 0; i < k; ++i) {
           CAPTURE(k, trial, row, i);
           REQUIRE(got[i].index == want[i].index);
-          REQUIRE(got[i].dist == want[i].dist);
+          REQUIRE(got[i].distance == std::sqrt(want[i].dist));
         }
       }
     }

@@ -116,6 +116,8 @@ class BoundedTree {
   /// The point at leaf-order position `pos`, and its original index.
   const T* point(std::size_t pos) const { return points_ + pos * dim(); }
   std::uint32_t index(std::size_t pos) const { return indices_[pos]; }
+  /// index(pos) for every position: a permutation of [0, size()).
+  const std::uint32_t* indices() const { return indices_; }
   /// A leaf's points by column, in blocks of column_block: axis a of its point at position begin + j
   /// is columns(leaf)[a * column_stride(leaf) + j]; the stride rounds the count up to whole blocks
   /// (the padding repeats the last point).

@@ -21,11 +21,17 @@
 #include "kdspace/joins/join_stats.hpp"
 #include "kdspace/joins/traversal.hpp"
 #include "kdspace/points/detail/result_sets.hpp"
+#include "kdspace/points/neighbor.hpp"
 
 namespace kdspace::detail {
 
-/// The k best candidates of each of n query points: row i is candidates[i * k, i * k + k); kth(i) is
-/// the distance of its k-th once it holds k, +inf before.
+/// The k best candidates of each of n query points, kept in the memory of the join's result: row i
+/// (query point i in the query tree's leaf order) is rows[i * k, i * k + k), as Neighbor{index,
+/// internal distance}; kth(i) is the distance of its k-th once it holds k, +inf before. finish()
+/// then puts the rows in the result's order (in place) with true distances. (The rows used to be a
+/// table of their own, copied into the result at the end: for 1e6 points at k = 10, double, 160 MB
+/// more memory to touch for the first time, whose page faults the single-tree batch does not pay;
+/// see the README, joins.)
 ///
 /// Every row starts full of placeholders (+inf, largest index), which any real candidate comes
 /// before (a real index is smaller; +inf distances included): so an offer is one comparison with the
@@ -42,11 +48,19 @@ template <class T>
 class KnnTable {
  public:
   static constexpr std::size_t sorted_rows_up_to = 32;
+  using Entry = Neighbor<T>;  ///< a candidate: its index, and its internal distance until finish()
 
-  KnnTable(std::size_t n, std::size_t k)
+  /// What every entry of the rows starts as (the caller fills them, in one pass with the allocation).
+  static constexpr Entry placeholder() {
+    return Entry{std::numeric_limits<std::uint32_t>::max(), std::numeric_limits<T>::infinity()};
+  }
+
+  /// rows: n * k entries, all placeholder(), which outlive the table.
+  KnnTable(Entry* rows, std::size_t n, std::size_t k)
       : k_(k),
+        n_(n),
         sorted_rows_(k <= sorted_rows_up_to),
-        candidates_(n * k, Candidate<T>{std::numeric_limits<T>::infinity(), std::numeric_limits<std::uint32_t>::max()}),
+        rows_(rows),
         kth_(n, std::numeric_limits<T>::infinity()),
         held_(sorted_rows_ ? n : 0, HeldCount{0}) {}
 
@@ -71,9 +85,9 @@ class KnnTable {
   /// Offers a candidate to row i: kept when it comes before the row's k-th in (distance, index)
   /// order (the decision of KnnResults::offer); false when refused.
   bool offer(std::size_t i, T dist, std::uint32_t index) {
-    Candidate<T>* row = candidates_.data() + i * k_;
-    if (!sorted_rows_) return offer_to_heap(i, row, Candidate<T>{dist, index});
-    if (!(dist < row[k_ - 1].dist || (dist == row[k_ - 1].dist && index < row[k_ - 1].index))) return false;
+    Entry* row = rows_ + i * k_;
+    if (!sorted_rows_) return offer_to_heap(i, row, Entry{index, dist});
+    if (!(dist < row[k_ - 1].distance || (dist == row[k_ - 1].distance && index < row[k_ - 1].index))) return false;
     // The search for its place starts after the real entries: the placeholders come after every
     // real candidate, and stepping over them one by one cost 45 moves a point for k = 10. A full
     // row's last entry is the one dropped. (Without a branch: whether the row is full is as good
@@ -85,44 +99,104 @@ class KnnTable {
     // distances (a second loop for ties cost its test on every insertion: callgrind 1090.3e6 ->
     // 1084.5e6 instructions, 2e5 uniform 3-D points, k = 10).
     for (; place > 0; --place) {
-      const T before = row[place - 1].dist;
+      const T before = row[place - 1].distance;
       if (!(dist < before || (dist == before && index < row[place - 1].index))) break;
       row[place] = row[place - 1];
     }
-    // Field by field: a Candidate made on the stack and copied whole was read back as 16 bytes
+    // Field by field: a candidate made on the stack and copied whole was read back as 16 bytes
     // right after its two parts were written (a store-forwarding stall on each insertion).
-    row[place].dist = dist;
+    row[place].distance = dist;
     row[place].index = index;
-    kth_[i] = row[k_ - 1].dist;
+    kth_[i] = row[k_ - 1].distance;
     return true;
   }
 
-  /// Row i in result order (once all offers are made).
-  const Candidate<T>* sorted_row(std::size_t i) {
-    Candidate<T>* row = candidates_.data() + i * k_;
-    if (!sorted_rows_) std::sort_heap(row, row + k_, comes_before);
-    return row;
+  /// Once all offers are made: each row in result order with true distances (Metric::to_distance),
+  /// and row i moved to row result_row[i] (result_row: a permutation of [0, n)), in place, cycle by
+  /// cycle: each row is read and written once, as the copy into a result of its own did.
+  template <class Metric>
+  void finish(const std::uint32_t* result_row) {
+    std::vector<bool> placed(n_, false);
+    std::vector<Entry> carried(k_);
+    for (std::size_t start = 0; start < n_; ++start) {
+      if (placed[start]) continue;
+      // Row `start` is carried to its place, the row found there to its own, and so on until the
+      // cycle comes back to `start` (for a random order about ln n cycles in all).
+      Entry* row = rows_ + start * k_;
+      std::copy(row, row + k_, carried.begin());
+      finish_row<Metric>(carried.data());
+      // Each row's place comes from its predecessor's, so the misses on the rows would come one
+      // after the other: the rows some steps ahead on the cycle are asked for in advance (1e6
+      // uniform 3-D points, k = 10, interleaved runs: the join's user time 0.85-0.92 s without,
+      // 0.79-0.84 s with, as before the rows moved into the result; 16 steps no better than 8).
+      std::size_t ahead = start;
+      for (std::size_t step = 0; step < prefetch_steps; ++step) ahead = result_row[ahead];
+      for (std::size_t to = result_row[start]; to != start; to = result_row[to]) {
+        ahead = result_row[ahead];
+        prefetch_row(rows_ + ahead * k_);
+        Entry* there = rows_ + to * k_;
+        if (sorted_rows_) {  // exchanged and finished in one loop
+          for (std::size_t j = 0; j < k_; ++j) {
+            const Entry found = there[j];
+            there[j] = carried[j];
+            carried[j] = Entry{found.index, Metric::to_distance(found.distance)};
+          }
+        } else {
+          std::swap_ranges(there, there + k_, carried.begin());
+          finish_row<Metric>(carried.data());
+        }
+        placed[to] = true;
+      }
+      std::copy(carried.begin(), carried.end(), row);
+      placed[start] = true;
+    }
   }
 
  private:
+  static constexpr std::size_t prefetch_steps = 8;
+  void prefetch_row(const Entry* row) const {
+#if defined(__GNUC__)
+    const char* first = reinterpret_cast<const char*>(row);
+    for (std::size_t byte = 0; byte < k_ * sizeof(Entry); byte += 64) __builtin_prefetch(first + byte, 1);
+#else
+    (void)row;
+#endif
+  }
+
+  // (internal distance, index) ascending, the order of ComesBefore; a function object, so that the
+  // heap algorithms inline it.
+  struct ComesFirst {
+    bool operator()(const Entry& a, const Entry& b) const {
+      return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
+    }
+  };
+  static constexpr ComesFirst comes_first{};
+
+  // A row in result order, with true distances.
+  template <class Metric>
+  void finish_row(Entry* row) const {
+    if (!sorted_rows_) std::sort_heap(row, row + k_, comes_first);
+    for (std::size_t j = 0; j < k_; ++j) row[j].distance = Metric::to_distance(row[j].distance);
+  }
+
   // Out of line, so that the sorted rows' offer stays small enough to be inlined where it is made.
 #if defined(__GNUC__)
   __attribute__((noinline))
 #endif
-  bool offer_to_heap(std::size_t i, Candidate<T>* row, const Candidate<T>& c) {
-    if (!comes_before(c, row[0])) return false;
-    std::pop_heap(row, row + k_, comes_before);
+  bool offer_to_heap(std::size_t i, Entry* row, const Entry& c) {
+    if (!comes_first(c, row[0])) return false;
+    std::pop_heap(row, row + k_, comes_first);
     row[k_ - 1] = c;
-    std::push_heap(row, row + k_, comes_before);
-    kth_[i] = row[0].dist;
+    std::push_heap(row, row + k_, comes_first);
+    kth_[i] = row[0].distance;
     return true;
   }
 
   std::size_t k_;
+  std::size_t n_;
   bool sorted_rows_;
-  // In huge pages where enabled (detail/huge_pages.hpp): 160 MB of rows for 1e6 points at
-  // k = 10, double.
-  HugePageVector<Candidate<T>> candidates_;
+  Entry* rows_;
+  // In huge pages where enabled (detail/huge_pages.hpp).
   HugePageVector<T> kth_;
   // Not a byte: a store through unsigned char may alias anything, and the compiler reloaded the
   // tables' pointers after each (callgrind: 40e6 more instructions than it saved).

@@ -49,25 +49,23 @@ void for_each_task(const Tree& queries, unsigned threads, JoinStats* stats, Body
 template <class Metric, class T, int Dim, class Space>
 NeighborLists<T> knn_join_trees(const BoundedTree<T, Dim>& queries, const BoundedTree<T, Dim>& reference, std::size_t k,
                                 bool self, const Space& space, unsigned threads, JoinStats* stats) {
-  KnnTable<T> table(queries.size(), k);
+  // The table keeps its rows in the result's memory (in huge pages where enabled),
+  // reserved, then filled with the table's placeholders in one pass.
+  const std::size_t n = queries.size();
+  NeighborLists<T> out;
+  reserve_in_huge_pages(out.offsets, n + 1);
+  out.offsets.resize(n + 1);
+  for (std::size_t q = 0; q <= n; ++q) out.offsets[q] = q * k;
+  reserve_in_huge_pages(out.neighbors, n * k);
+  out.neighbors.assign(n * k, KnnTable<T>::placeholder());
+  KnnTable<T> table(out.neighbors.data(), n, k);
   std::vector<T> node_bound(queries.node_count(), std::numeric_limits<T>::infinity());
   using Rule = KnnRule<T, Dim, Space>;
   for_each_task(queries, threads, stats, [&](std::size_t, std::uint32_t root, JoinStats& task_stats, unsigned) {
     Rule rule(queries, reference, space, self, table, node_bound, task_stats);
     DualTraversal<Rule>(rule, task_stats).run(root, 0, {});
   });
-  NeighborLists<T> out;
-  // Large results in huge pages where enabled: the rows are written out of order.
-  reserve_in_huge_pages(out.offsets, queries.size() + 1);
-  out.offsets.resize(queries.size() + 1);
-  for (std::size_t q = 0; q <= queries.size(); ++q) out.offsets[q] = q * k;
-  reserve_in_huge_pages(out.neighbors, queries.size() * k);
-  out.neighbors.resize(queries.size() * k);
-  for (std::size_t pos = 0; pos < queries.size(); ++pos) {
-    const Candidate<T>* sorted = table.sorted_row(pos);
-    Neighbor<T>* row = out.neighbors.data() + std::size_t{queries.index(pos)} * k;
-    for (std::size_t i = 0; i < k; ++i) row[i] = Neighbor<T>{sorted[i].index, Metric::to_distance(sorted[i].dist)};
-  }
+  table.template finish<Metric>(queries.indices());  // rows by original index
   return out;
 }
 
