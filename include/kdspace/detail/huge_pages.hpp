@@ -18,7 +18,7 @@
 // Off unless asked for, because on the virtual machines we measure on it cost more than it saved
 // (README, joins): page faults 281k -> 45k for the joins bench at 1e6 points, the single-tree batch
 // 8% less user time, the self-join none; but a huge page whose memory the guest had handed back to
-// the host (free page reporting) took 1-3 ms to fault in, 1.3-4x the 512 small faults it replaces, so
+// the host (free page reporting) took 3-6 ms to fault in, 4-8x the 512 small faults it replaces, so
 // a first call (a fresh process) spent 0.5-1 s more in the kernel, and pairs within r, which touch
 // their arrays about once, took 1.5x as long.
 #pragma once
