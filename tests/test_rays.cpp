@@ -860,6 +860,52 @@ TEST_CASE("rays: nearly parallel rays and rays with subnormal direction componen
   check_scene(boxes, rays);
 }
 
+TEST_CASE("rays: the leaf filter's comparison from t >= 0 accepts every interval the widenings accept",
+          "[rays]") {
+  // may_hit_from_nonnegative must be conservative: wherever widen_down(t_near) <= widen_up(t_far)
+  // holds for a t_near >= 0, it holds too. Intervals at and around equality at every scale (ratios a
+  // few ulps to 2^-16 apart), subnormal and zero ends, negative and infinite far ends.
+  using kdspace::detail::may_hit_from_nonnegative;
+  using kdspace::detail::widen_down;
+  using kdspace::detail::widen_up;
+  const float inf = std::numeric_limits<float>::infinity();
+  Rng rng(31);
+  std::uniform_int_distribution<int> exponent(-149, 127);
+  std::uniform_int_distribution<int> ulps(-600, 600);
+  std::uniform_real_distribution<float> mantissa(1.0f, 2.0f);
+  std::size_t accepted = 0, checked = 0;
+  const auto check = [&](float t_near, float t_far) {
+    if (!(t_near >= 0) || std::isnan(t_far)) return;
+    ++checked;
+    if (!(widen_down(t_near) <= widen_up(t_far))) return;
+    ++accepted;
+    INFO("t_near " << t_near << " t_far " << t_far);
+    REQUIRE(may_hit_from_nonnegative(t_near, t_far));
+  };
+  for (int i = 0; i < 400000; ++i) {
+    const float t_near = std::ldexp(mantissa(rng), exponent(rng));
+    // t_far a few to a few hundred ulps either side of t_near, scaled by up to 2^-16 either way.
+    float t_far = t_near;
+    const int step = ulps(rng);
+    for (int k = 0; k < std::abs(step) % 40; ++k) t_far = std::nextafter(t_far, step < 0 ? 0.0f : inf);
+    if (i % 3 == 0) t_far = t_far * (1.0f + static_cast<float>(step) * 0x1p-25f);
+    check(t_near, t_far);
+    check(t_far, t_near);
+    check(0.0f, -t_far);
+  }
+  const float edges[] = {0.0f,   -0.0f, std::numeric_limits<float>::denorm_min(), 0x1p-127f, 0x1p-126f,
+                         0x1p-125f, 0x1p-124f, 0x1p-123f, 1.0f, 0x1p100f, std::numeric_limits<float>::max(), inf};
+  for (const float a : edges)
+    for (const float b : edges) {
+      check(a, b);
+      check(a, -b);
+      check(a, std::nextafter(b, 0.0f));
+      check(a, std::nextafter(-b, 0.0f));
+    }
+  CHECK(accepted > checked / 4);
+  CHECK(accepted < checked);
+}
+
 TEST_CASE("rays: the eight-box leaf filter lets through exactly the lanes of two four-box filters",
           "[rays]") {
 #if defined(KDSPACE_AVX2_DISPATCH)

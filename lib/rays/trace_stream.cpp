@@ -353,9 +353,10 @@ class Stream {
     std::size_t i = 0;
 #if defined(KDSPACE_AVX2_DISPATCH)
     // Groups of eight rays box by box, the last one too if it holds enough of them (a group of a
-    // few rays costs as much as a full one); the rest one by one.
+    // few rays costs as much as a full one); the rest one by one, and all of them one by one for a
+    // range that starts below 0 (leaf_by_boxes' comparison needs t_min >= 0).
     if constexpr (Wide)
-      for (; i + group_min_rays <= n; i += 8) leaf_by_boxes(leaf, entering + i, std::min<std::size_t>(8, n - i));
+      for (; range_.t_min >= 0 && i + group_min_rays <= n; i += 8) leaf_by_boxes(leaf, entering + i, std::min<std::size_t>(8, n - i));
 #endif
     for (; i < n; ++i) {
       const std::uint32_t slot = entering[i];
@@ -369,7 +370,8 @@ class Stream {
 
 #if defined(KDSPACE_AVX2_DISPATCH)
   /// test_leaf for the rays slots[0 .. rays) (at most 8), all of them against one box at a time: for each
-  /// ray the same float filter (block_pair_candidates' operations in its order) and the same double
+  /// ray the float filter's parameters (block_pair_candidates' operations in its order), compared by
+  /// may_hit_from_nonnegative (a range whose t_min >= 0: at_leaf sends no other), and the same double
   /// test, box after box in the leaf's order. A ray's bound drops as its best hit does, so a box is
   /// filtered with the bound its predecessors left (never tighter than its double test, which
   /// decides alone), and an any-hit ray stops at the first box it hits.
@@ -381,7 +383,7 @@ class Stream {
     const std::uint32_t count = leaf.count();
     stats_.boxes_tested += static_cast<std::uint64_t>(count) * rays;
     // Lanes past `rays` read slots[rays ..] (the leaf ray array has 8 of slack), taken as slot 0, and
-    // are closed: bound -inf, so that the filter's far end is NaN and no box passes.
+    // are closed: bound -inf, so that the filter's far end is -inf and no box passes.
     const __m256i valid =
         _mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(rays)), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
     int enter_plane[3], leave_plane[3];
@@ -397,6 +399,7 @@ class Stream {
       inverse[a] = _mm256_i32gather_ps(s_.inverse.data() + a * capacity_, slot, 4);
     }
     const __m256 t_low = _mm256_set1_ps(range_.t_min);
+    const __m256 shrink = _mm256_set1_ps(FromNonNegative::shrink), slack = _mm256_set1_ps(FromNonNegative::slack);
     __m256 bound = _mm256_blendv_ps(_mm256_set1_ps(minus_infinity), _mm256_i32gather_ps(s_.best_bound.data(), slot, 4),
                                     _mm256_castsi256_ps(valid));
     const LeafBlock* block = view_.blocks + leaf.first() / 4;
@@ -413,9 +416,8 @@ class Stream {
           t_near = _mm256_max_ps(t0, t_near);  // as block_pair_candidates: the second operand for a NaN
           t_far = _mm256_min_ps(t1, t_far);
         }
-        t_near = _mm256_sub_ps(t_near, widening8(t_near));
-        t_far = _mm256_add_ps(t_far, widening8(t_far));
-        auto passed = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(t_near, t_far, _CMP_LE_OQ)));
+        const __m256 shrunk = _mm256_sub_ps(_mm256_mul_ps(t_near, shrink), slack);  // t_near >= t_min >= 0
+        auto passed = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(shrunk, t_far, _CMP_LE_OQ)));
         if (passed == 0) continue;
         alignas(32) float bound_of[8];
         _mm256_store_ps(bound_of, bound);
