@@ -893,8 +893,10 @@ TEST_CASE("rays: the leaf filter's comparison from t >= 0 accepts every interval
     check(t_far, t_near);
     check(0.0f, -t_far);
   }
-  const float edges[] = {0.0f,   -0.0f, std::numeric_limits<float>::denorm_min(), 0x1p-127f, 0x1p-126f,
-                         0x1p-125f, 0x1p-124f, 0x1p-123f, 1.0f, 0x1p100f, std::numeric_limits<float>::max(), inf};
+  const float edges[] = {0.0f,      -0.0f,     std::numeric_limits<float>::denorm_min(),
+                         0x1p-127f, 0x1p-126f, 0x1p-125f,
+                         0x1p-124f, 0x1p-123f, 1.0f,
+                         0x1p100f,  std::numeric_limits<float>::max(), inf};
   for (const float a : edges)
     for (const float b : edges) {
       check(a, b);

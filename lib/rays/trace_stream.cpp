@@ -356,7 +356,8 @@ class Stream {
     // few rays costs as much as a full one); the rest one by one, and all of them one by one for a
     // range that starts below 0 (leaf_by_boxes' comparison needs t_min >= 0).
     if constexpr (Wide)
-      for (; range_.t_min >= 0 && i + group_min_rays <= n; i += 8) leaf_by_boxes(leaf, entering + i, std::min<std::size_t>(8, n - i));
+      for (; range_.t_min >= 0 && i + group_min_rays <= n; i += 8)
+        leaf_by_boxes(leaf, entering + i, std::min<std::size_t>(8, n - i));
 #endif
     for (; i < n; ++i) {
       const std::uint32_t slot = entering[i];
@@ -399,7 +400,8 @@ class Stream {
       inverse[a] = _mm256_i32gather_ps(s_.inverse.data() + a * capacity_, slot, 4);
     }
     const __m256 t_low = _mm256_set1_ps(range_.t_min);
-    const __m256 shrink = _mm256_set1_ps(FromNonNegative::shrink), slack = _mm256_set1_ps(FromNonNegative::slack);
+    const __m256 shrink = _mm256_set1_ps(FromNonNegative::shrink);
+    const __m256 slack = _mm256_set1_ps(FromNonNegative::slack);
     __m256 bound = _mm256_blendv_ps(_mm256_set1_ps(minus_infinity), _mm256_i32gather_ps(s_.best_bound.data(), slot, 4),
                                     _mm256_castsi256_ps(valid));
     const LeafBlock* block = view_.blocks + leaf.first() / 4;
