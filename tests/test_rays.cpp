@@ -884,7 +884,8 @@ TEST_CASE("rays: the leaf filter's comparison from t >= 0 accepts every interval
   };
   for (int i = 0; i < 400000; ++i) {
     const float t_near = std::ldexp(mantissa(rng), exponent(rng));
-    // t_far a few to a few hundred ulps either side of t_near, scaled by up to 2^-16 either way.
+    // t_far up to 39 ulps either side of t_near, every third one also scaled by up to 600 * 2^-25
+    // (about 2^-16) either way.
     float t_far = t_near;
     const int step = ulps(rng);
     for (int k = 0; k < std::abs(step) % 40; ++k) t_far = std::nextafter(t_far, step < 0 ? 0.0f : inf);

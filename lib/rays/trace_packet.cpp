@@ -62,6 +62,9 @@ struct Lanes<4> {
   }
   static unsigned less(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmplt_ps(a, b))); }
   static unsigned less_equal(V a, V b) { return static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(a, b))); }
+  static unsigned may_hit_from_nonnegative(V t_near, V t_far) {
+    return detail::may_hit_from_nonnegative4(t_near, t_far);
+  }
 };
 
 #if defined(KDSPACE_AVX2_DISPATCH)
@@ -89,6 +92,9 @@ struct Lanes<8> {
   }
   KDSPACE_AVX2_TARGET static unsigned less_equal(V a, V b) {
     return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(a, b, _CMP_LE_OQ)));
+  }
+  KDSPACE_AVX2_TARGET static unsigned may_hit_from_nonnegative(V t_near, V t_far) {
+    return detail::may_hit_from_nonnegative8(t_near, t_far);
   }
 };
 #undef KDSPACE_AVX2_TARGET

@@ -400,8 +400,6 @@ class Stream {
       inverse[a] = _mm256_i32gather_ps(s_.inverse.data() + a * capacity_, slot, 4);
     }
     const __m256 t_low = _mm256_set1_ps(range_.t_min);
-    const __m256 shrink = _mm256_set1_ps(FromNonNegative::shrink);
-    const __m256 slack = _mm256_set1_ps(FromNonNegative::slack);
     __m256 bound = _mm256_blendv_ps(_mm256_set1_ps(minus_infinity), _mm256_i32gather_ps(s_.best_bound.data(), slot, 4),
                                     _mm256_castsi256_ps(valid));
     const LeafBlock* block = view_.blocks + leaf.first() / 4;
@@ -418,8 +416,7 @@ class Stream {
           t_near = _mm256_max_ps(t0, t_near);  // as block_pair_candidates: the second operand for a NaN
           t_far = _mm256_min_ps(t1, t_far);
         }
-        const __m256 shrunk = _mm256_sub_ps(_mm256_mul_ps(t_near, shrink), slack);  // t_near >= t_min >= 0
-        auto passed = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(shrunk, t_far, _CMP_LE_OQ)));
+        unsigned passed = may_hit_from_nonnegative8(t_near, t_far);  // t_near >= t_min >= 0
         if (passed == 0) continue;
         alignas(32) float bound_of[8];
         _mm256_store_ps(bound_of, bound);

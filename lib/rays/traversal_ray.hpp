@@ -72,6 +72,22 @@ struct FromNonNegative {
 inline bool may_hit_from_nonnegative(float t_near, float t_far) {
   return t_near * FromNonNegative::shrink - FromNonNegative::slack <= t_far;
 }
+#if defined(__SSE2__)
+/// may_hit_from_nonnegative on four lanes: bit l for lane l.
+inline unsigned may_hit_from_nonnegative4(__m128 t_near, __m128 t_far) {
+  const __m128 shrunk = _mm_sub_ps(_mm_mul_ps(t_near, _mm_set1_ps(FromNonNegative::shrink)),
+                                   _mm_set1_ps(FromNonNegative::slack));
+  return static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(shrunk, t_far)));
+}
+#endif
+#if defined(KDSPACE_AVX2_DISPATCH)
+/// may_hit_from_nonnegative on eight lanes: bit l for lane l.
+__attribute__((target("avx2"))) inline unsigned may_hit_from_nonnegative8(__m256 t_near, __m256 t_far) {
+  const __m256 shrunk = _mm256_sub_ps(_mm256_mul_ps(t_near, _mm256_set1_ps(FromNonNegative::shrink)),
+                                      _mm256_set1_ps(FromNonNegative::slack));
+  return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(shrunk, t_far, _CMP_LE_OQ)));
+}
+#endif
 
 /// t rounded to float; a hit beyond the float range reports the largest finite float.
 inline float to_float_t(double t) {
@@ -242,11 +258,7 @@ inline unsigned block_candidates<float>(const LeafBlock& block, const TraversalR
     t_near = _mm_max_ps(t0, t_near);  // MAXPS/MINPS return the second operand when either is NaN
     t_far = _mm_min_ps(t1, t_far);
   }
-  if (t_lo >= 0) {  // then t_near >= 0: may_hit_from_nonnegative's two operations
-    const __m128 shrunk = _mm_sub_ps(_mm_mul_ps(t_near, _mm_set1_ps(FromNonNegative::shrink)),
-                                     _mm_set1_ps(FromNonNegative::slack));
-    return static_cast<unsigned>(_mm_movemask_ps(_mm_cmple_ps(shrunk, t_far)));
-  }
+  if (t_lo >= 0) return may_hit_from_nonnegative4(t_near, t_far);  // then t_near >= 0
   const __m128 magnitude = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
   const __m128 relative = _mm_set1_ps(Widening<float>::relative);
   const __m128 absolute = _mm_set1_ps(Widening<float>::absolute);
@@ -293,11 +305,7 @@ __attribute__((target("avx2"))) inline unsigned block_pair_candidates(const Leaf
     t_near = _mm256_max_ps(t0, t_near);  // as MAXPS/MINPS: the second operand when either is NaN
     t_far = _mm256_min_ps(t1, t_far);
   }
-  if (t_lo >= 0) {  // then t_near >= 0: may_hit_from_nonnegative's two operations
-    const __m256 shrunk = _mm256_sub_ps(_mm256_mul_ps(t_near, _mm256_set1_ps(FromNonNegative::shrink)),
-                                        _mm256_set1_ps(FromNonNegative::slack));
-    return static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(shrunk, t_far, _CMP_LE_OQ)));
-  }
+  if (t_lo >= 0) return may_hit_from_nonnegative8(t_near, t_far);  // then t_near >= 0
   const __m256 magnitude = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
   const __m256 relative = _mm256_set1_ps(Widening<float>::relative);
   const __m256 absolute = _mm256_set1_ps(Widening<float>::absolute);
