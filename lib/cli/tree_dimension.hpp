@@ -8,7 +8,7 @@
 // CGAL's building.ply and bunny00.off, a tenth held out as queries, and their 2-D projections): the
 // run-time tree takes 5-6% more instructions under L2 (it already scans L2 leaves of 2..8 dimensions
 // with the dimension as a constant) and 19-23% more under L1 and Linf. The L2 trees of 2 and 3
-// are compiled once in the library (lib/points/instances.cpp), the L1 and Linf ones in the command.
+// are compiled once in the library (lib/points/instances_*.cpp), the L1 and Linf ones in the command.
 #pragma once
 
 #include <cstddef>

@@ -370,18 +370,26 @@ std::vector<double> count_weighted_pairs(const PointTree<T, Dim, Metric>& points
 
 }  // namespace kdspace
 
-// The joins of the common tree types are compiled once in the library (lib/joins/instances.cpp).
+// The joins of the common tree types are compiled once in the library, in three files so that a
+// parallel build shares them out (lib/joins/instances_float.cpp, instances_double.cpp,
+// instances_fixed.cpp).
 namespace kdspace::detail {
-#define KDSPACE_JOIN_INSTANCES(PREFIX)          \
+#define KDSPACE_JOIN_INSTANCES_FLOAT(PREFIX)    \
   PREFIX struct Joins<float, Dynamic, L2>;      \
   PREFIX struct Joins<float, Dynamic, L1>;      \
-  PREFIX struct Joins<float, Dynamic, Linf>;    \
+  PREFIX struct Joins<float, Dynamic, Linf>;
+#define KDSPACE_JOIN_INSTANCES_DOUBLE(PREFIX)   \
   PREFIX struct Joins<double, Dynamic, L2>;     \
   PREFIX struct Joins<double, Dynamic, L1>;     \
-  PREFIX struct Joins<double, Dynamic, Linf>;   \
+  PREFIX struct Joins<double, Dynamic, Linf>;
+#define KDSPACE_JOIN_INSTANCES_FIXED(PREFIX)    \
   PREFIX struct Joins<float, 2, L2>;            \
   PREFIX struct Joins<float, 3, L2>;            \
   PREFIX struct Joins<double, 2, L2>;           \
   PREFIX struct Joins<double, 3, L2>;
+#define KDSPACE_JOIN_INSTANCES(PREFIX)          \
+  KDSPACE_JOIN_INSTANCES_FLOAT(PREFIX)          \
+  KDSPACE_JOIN_INSTANCES_DOUBLE(PREFIX)         \
+  KDSPACE_JOIN_INSTANCES_FIXED(PREFIX)
 KDSPACE_JOIN_INSTANCES(extern template)
 }  // namespace kdspace::detail

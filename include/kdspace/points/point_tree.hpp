@@ -714,19 +714,26 @@ class PointTree {
 
 }  // namespace kdspace
 
-// The common instantiations are compiled once in the library (lib/points/instances.cpp).
+// The common instantiations are compiled once in the library, in three files so that a parallel
+// build shares them out (lib/points/instances_float.cpp, instances_double.cpp, instances_fixed.cpp).
 namespace kdspace {
-#define KDSPACE_POINT_TREE_INSTANCES(PREFIX)   \
-  PREFIX class PointTree<float, Dynamic, L2>;  \
-  PREFIX class PointTree<float, Dynamic, L1>;  \
-  PREFIX class PointTree<float, Dynamic, Linf>; \
-  PREFIX class PointTree<double, Dynamic, L2>; \
-  PREFIX class PointTree<double, Dynamic, L1>; \
-  PREFIX class PointTree<double, Dynamic, Linf>; \
-  PREFIX class PointTree<float, 2, L2>;        \
-  PREFIX class PointTree<float, 3, L2>;        \
-  PREFIX class PointTree<double, 2, L2>;       \
-  PREFIX class PointTree<double, 3, L2>;        \
+#define KDSPACE_POINT_TREE_INSTANCES_FLOAT(PREFIX) \
+  PREFIX class PointTree<float, Dynamic, L2>;      \
+  PREFIX class PointTree<float, Dynamic, L1>;      \
+  PREFIX class PointTree<float, Dynamic, Linf>;
+#define KDSPACE_POINT_TREE_INSTANCES_DOUBLE(PREFIX) \
+  PREFIX class PointTree<double, Dynamic, L2>;      \
+  PREFIX class PointTree<double, Dynamic, L1>;      \
+  PREFIX class PointTree<double, Dynamic, Linf>;    \
   PREFIX class PointTree<double, Dynamic, Minkowski>;
+#define KDSPACE_POINT_TREE_INSTANCES_FIXED(PREFIX) \
+  PREFIX class PointTree<float, 2, L2>;            \
+  PREFIX class PointTree<float, 3, L2>;            \
+  PREFIX class PointTree<double, 2, L2>;           \
+  PREFIX class PointTree<double, 3, L2>;
+#define KDSPACE_POINT_TREE_INSTANCES(PREFIX) \
+  KDSPACE_POINT_TREE_INSTANCES_FLOAT(PREFIX) \
+  KDSPACE_POINT_TREE_INSTANCES_DOUBLE(PREFIX) \
+  KDSPACE_POINT_TREE_INSTANCES_FIXED(PREFIX)
 KDSPACE_POINT_TREE_INSTANCES(extern template)
 }  // namespace kdspace
