@@ -264,8 +264,8 @@ TEST_CASE("joins: every join equals brute force bit for bit on a torus", "[joins
 
 // The joins on the fixed 3-D trees of the benchmarks, whose leaves of up to 64 points span several
 // blocks of 8, on every shape. Where the processor has AVX2 the base cases run in their AVX2
-// compilation (avx2_dispatch.hpp); the ctest entry `baseline_without_avx2` runs these cases again with
-// KDSPACE_NO_AVX2 set, so both compilations are checked.
+// compilation (avx2_dispatch.hpp); the ctest entry `baseline_without_avx2_joins` runs these cases
+// again with KDSPACE_NO_AVX2 set, so both compilations are checked.
 TEST_CASE("joins: the base cases on 3-D trees equal brute force", "[joins][exact][periodic]") {
   CAPTURE(kdspace::detail::avx2_dispatch());
   std::uint32_t seed = 400;

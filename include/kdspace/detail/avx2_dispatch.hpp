@@ -14,7 +14,7 @@ namespace kdspace::detail {
 
 /// Whether the AVX2 compilations run: the processor has AVX2 and the environment variable
 /// KDSPACE_NO_AVX2 is not set (both read once per process). The tests run once more with it set, so
-/// the baseline compilations are checked on AVX2 machines too (ctest entry `baseline_without_avx2`).
+/// the baseline compilations are checked on AVX2 machines too (ctest entries `baseline_without_avx2_*`).
 inline bool avx2_dispatch() {
 #if defined(KDSPACE_AVX2_DISPATCH)
   static const bool yes = __builtin_cpu_supports("avx2") && std::getenv("KDSPACE_NO_AVX2") == nullptr;

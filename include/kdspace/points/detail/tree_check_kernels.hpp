@@ -3,7 +3,7 @@
 // leaf test of the AVX2 walk, tree_check_walk3.hpp), and the
 // point order's bits set with BMI2's shifts after an AVX2 range check of the values (no clamp a
 // value): about a third fewer instructions a value. They decide exactly what the baseline loops
-// decide; the tests run both (KDSPACE_NO_AVX2, ctest entry `baseline_without_avx2`).
+// decide; the tests run both (KDSPACE_NO_AVX2, ctest entry `baseline_without_avx2_index`).
 #pragma once
 
 #include <cstddef>

@@ -3,7 +3,7 @@
 // leaf's points tested against the cell inline. It decides exactly what TreeChecker's visit() and
 // visit_leaf() decide for such a tree and returns false where they would throw; the checker then
 // walks the same subtree again with visit() to name the problem (the tests run both, and
-// `baseline_without_avx2` the baseline alone).
+// `baseline_without_avx2_index` the baseline alone).
 #pragma once
 
 #include <cstddef>
