@@ -282,7 +282,7 @@ Tree3 build_tree(const std::vector<float>& base, std::size_t n, unsigned threads
 }
 
 Tree3 load_tree(const std::string& path, unsigned threads) {
-  return kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, threads);
+  return kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, kdspace::Verify::safety, threads);
 }
 
 // In the child: one build of the parent's points, or one mapped load of `path`, on `threads`; prints
@@ -384,19 +384,23 @@ void part_load(std::size_t scale, int reps, const std::string& dir) {
     const auto base = uniform_points(n, 3, 1);
     const auto queries = uniform_points(nq, 3, 2);
     using Tree = kdspace::PointTree<float>;
-    rows.push_back(load_against_build<Tree>(
-        "PointTree, uniform 3-D float", n, dir + "/bench-tree.kdx", reps,
-        [&] { return Tree(base.data(), n, 3); },
-        [](const std::string& p, kdspace::io::LoadMode m) {
-          return kdspace::io::load_point_tree<float>(p, m);
-        },
-        [](const std::shared_ptr<const kdspace::io::IndexFile>& f) {
-          return kdspace::io::load_point_tree<float>(f);
-        },
-        [&](const Tree& a, const Tree& b) {
-          return a.knn_batch(queries.data(), nq, 10, {}, 1).neighbors ==
-                 b.knn_batch(queries.data(), nq, 10, {}, 1).neighbors;
-        }));
+    // The default load (Verify::safety) and the full check (Verify::full: every point against its
+    // cell, the order a permutation), each against its own build.
+    for (const kdspace::Verify verify : {kdspace::Verify::safety, kdspace::Verify::full})
+      rows.push_back(load_against_build<Tree>(
+          verify == kdspace::Verify::full ? "PointTree, uniform 3-D float (Verify::full)"
+                                          : "PointTree, uniform 3-D float",
+          n, dir + "/bench-tree.kdx", reps, [&] { return Tree(base.data(), n, 3); },
+          [verify](const std::string& p, kdspace::io::LoadMode m) {
+            return kdspace::io::load_point_tree<float>(p, m, verify);
+          },
+          [verify](const std::shared_ptr<const kdspace::io::IndexFile>& f) {
+            return kdspace::io::load_point_tree<float>(f, verify);
+          },
+          [&](const Tree& a, const Tree& b) {
+            return a.knn_batch(queries.data(), nq, 10, {}, 1).neighbors ==
+                   b.knn_batch(queries.data(), nq, 10, {}, 1).neighbors;
+          }));
   }
   {
     const std::size_t dim = 128;

@@ -154,8 +154,9 @@ TEMPLATE_TEST_CASE("index: a saved point tree loads, mapped or read, with the sa
         const PointTree<T> built(points.data(), n, dim, params);
         const std::string path = tmp.file("tree.kdx");
         io::save(path, built);
-        for (auto mode : {io::LoadMode::map, io::LoadMode::read}) {
-          const auto loaded = io::load_point_tree<T>(path, mode);
+        for (auto mode : {io::LoadMode::map, io::LoadMode::read})
+        for (auto verify : {kdspace::Verify::safety, kdspace::Verify::full}) {
+          const auto loaded = io::load_point_tree<T>(path, mode, verify);
           REQUIRE(loaded.nodes().borrowed());
           REQUIRE(loaded.size() == n);
           REQUIRE(loaded.depth() == built.depth());
@@ -292,15 +293,18 @@ TEST_CASE("index: every single changed byte and every truncation of a file is a 
 TEST_CASE(
     "index: changes that keep the checksums valid are caught by the structural checks, or answer exactly",
     "[index][errors]") {
-  // Resealing recomputes every checksum after a change, as a forger could: what still loads must be
-  // a sound tree, and a sound tree answers as brute force over its own points.
+  // Resealing recomputes every checksum after a change, as a forger could. What Verify::full loads
+  // must be a sound tree, and a sound tree answers as brute force over its own points. What the
+  // default Verify::safety loads must keep every query inside the arrays (ASan watches) and return
+  // indices below n; it loads everything Verify::full loads (each names the first problem it meets,
+  // so where both refuse their messages may differ).
   TempDir tmp;
   SmallIndex small;
   const std::string good = tmp.file("good.kdx"), bad = tmp.file("bad.kdx");
   io::save(good, small.tree);
   const std::vector<unsigned char> bytes = file_bytes(good);
   std::mt19937 rng(17);
-  std::size_t refused = 0, loaded = 0;
+  std::size_t refused = 0, refused_by_both = 0, loaded = 0;
   for (int trial = 0; trial < 3000; ++trial) {
     std::vector<unsigned char> changed = bytes;
     const int changes = 1 + trial % 3;
@@ -311,8 +315,22 @@ TEST_CASE(
     io::reseal_index_bytes(changed);
     write_bytes(bad, changed);
     CAPTURE(trial);
+    std::string safety_refused;
     try {
-      const auto tree = io::load_point_tree<float>(bad);
+      const auto tree = io::load_point_tree<float>(bad, io::LoadMode::map, kdspace::Verify::safety);
+      for (std::size_t k : {std::size_t{1}, std::size_t{5}, tree.size()}) {
+        const auto answers = tree.knn_batch(small.queries.data(), 20, k, {}, 1);
+        for (const auto& nb : answers.neighbors) REQUIRE(nb.index < tree.size());
+      }
+      const auto within = tree.radius_batch(small.queries.data(), 20, 0.5f, 1000, 1);
+      for (const auto& nb : within.neighbors) REQUIRE(nb.index < tree.size());
+    } catch (const kdspace::Error& e) {
+      safety_refused = e.what();
+      REQUIRE(safety_refused.rfind(bad + ": ", 0) == 0);
+    }
+    try {
+      const auto tree = io::load_point_tree<float>(bad, io::LoadMode::map, kdspace::Verify::full);
+      REQUIRE(safety_refused == "");
       ++loaded;
       const auto parts = tree.parts();
       std::vector<float> rows(tree.size() * 3);  // the loaded points, by original index
@@ -323,9 +341,12 @@ TEST_CASE(
     } catch (const kdspace::Error& e) {
       ++refused;
       REQUIRE(std::string(e.what()).rfind(bad + ": ", 0) == 0);
+      if (safety_refused != "") ++refused_by_both;
     }
   }
   CHECK(refused > 1000);
+  CHECK(refused_by_both > 500);  // the header, the section table, the nodes, the order's range
+  CHECK(refused_by_both < refused);  // and points moved out of their cells, which only Verify::full reads
   CHECK(loaded > 100);  // changes of coordinates that keep the tree sound
 }
 
@@ -374,32 +395,47 @@ TEST_CASE("index: a large file, checked in chunks on two threads, still catches 
 TEST_CASE("index: a point order that is no permutation is named, in a tree checked on two threads",
           "[index][errors]") {
   // With every checksum resealed, only the structural checks stand in the way: the message names the
-  // first index that is out of range or given twice, as the one-thread check did.
+  // first index that is out of range or (Verify::full) given twice, as the one-thread check did. The
+  // default Verify::safety names an index out of range alike, and loads one given twice.
   const std::size_t n = kdspace::detail::parallel_tree_check + 1000;
   TempDir tmp;
   const std::string path = tmp.file("order.kdx");
   saved_tree(path, Shape::clustered, n, 9);
   const std::vector<unsigned char> bytes = file_bytes(path);
   const io::SectionEntry order = *io::IndexFile::open(path)->find(io::SectionType::order);
-  auto with_order = [&](std::size_t i, std::uint32_t value) {
+  auto with_order = [&](std::size_t i, std::uint32_t value, kdspace::Verify verify = kdspace::Verify::full) {
     std::vector<unsigned char> changed = bytes;
     std::memcpy(changed.data() + order.offset + 4 * i, &value, 4);
     io::reseal_index_bytes(changed);
     write_bytes(path, changed);
-    return error_message([&] { io::load_point_tree<float>(path); });
+    const std::string message = error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify); });
+    CHECK(message == error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify, 1); }));
+    return message;
   };
   auto value_at = [&](std::size_t i) {
     std::uint32_t v;
     std::memcpy(&v, bytes.data() + order.offset + 4 * i, 4);
     return v;
   };
-  CHECK(with_order(n - 1, static_cast<std::uint32_t>(n)) ==
-        path + ": point tree: index " + std::to_string(n - 1) + " of the point order is " +
-            std::to_string(n) + " (out of range)");
+  for (const kdspace::Verify verify : {kdspace::Verify::full, kdspace::Verify::safety}) {
+    for (const std::size_t i : {std::size_t{0}, n / 2, n - 1})
+      CHECK(with_order(i, static_cast<std::uint32_t>(n + i), verify) ==
+            path + ": point tree: index " + std::to_string(i) + " of the point order is " +
+                std::to_string(n + i) + " (out of range)");
+  }
   const std::size_t later = n / 2;  // the values of a permutation differ: value_at(later) != value_at(5)
   CHECK(with_order(later, value_at(5)) == path + ": point tree: index " + std::to_string(later) +
                                               " of the point order is " + std::to_string(value_at(5)) +
                                               " (given twice)");
+  {  // Verify::safety loads it: the indices stay below n
+    std::vector<unsigned char> changed = bytes;
+    const std::uint32_t twice = value_at(5);
+    std::memcpy(changed.data() + order.offset + 4 * later, &twice, 4);
+    io::reseal_index_bytes(changed);
+    write_bytes(path, changed);
+    CHECK_NOTHROW(io::load_point_tree<float>(path));
+    CHECK_NOTHROW(io::load_point_tree<float>(path, io::LoadMode::map, kdspace::Verify::safety, 1));
+  }
 }
 
 TEST_CASE(
@@ -407,8 +443,9 @@ TEST_CASE(
     "[index][errors][threads]") {
   // With every checksum resealed, a point moved out of the root cell must be found by whichever walk
   // reads it (the first points, those around the middle where the second walk starts, the last),
-  // and named as the one-thread check names it: its leaf. A broken link of the root (on the path the
-  // two walks split along) is named too.
+  // and named as the one-thread check names it: its leaf (Verify::full; the default Verify::safety
+  // does not read the points, and loads it). A broken link of the root (on the path the two walks
+  // split along) is named too, at either level.
   const std::size_t n = std::size_t{3} << 16;
   REQUIRE(n >= kdspace::detail::parallel_tree_check);
   TempDir tmp;
@@ -429,11 +466,12 @@ TEST_CASE(
     return node_array.size();
   };
   // The same message whether the check runs on two threads or on one (threads 1).
-  auto load_changed = [&](std::vector<unsigned char> changed) {
+  auto load_changed = [&](std::vector<unsigned char> changed, kdspace::Verify verify = kdspace::Verify::full) {
     io::reseal_index_bytes(changed);
     write_bytes(path, changed);
-    const std::string alone = error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, 1); });
-    const std::string message = error_message([&] { io::load_point_tree<float>(path); });
+    const std::string alone =
+        error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify, 1); });
+    const std::string message = error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify); });
     CHECK(alone == message);
     return message;
   };
@@ -445,15 +483,19 @@ TEST_CASE(
     CHECK(load_changed(changed) ==
           path + ": point tree: node " + std::to_string(leaf_of(row)) +
               ": a point lies outside the bounds and splits above its leaf, or is not finite");
+    CHECK_NOTHROW(io::load_point_tree<float>(path, io::LoadMode::map, kdspace::Verify::safety));
+    CHECK_NOTHROW(io::load_point_tree<float>(path, io::LoadMode::map, kdspace::Verify::safety, 1));
   }
   std::vector<unsigned char> changed = bytes;
   const std::uint32_t link = node_array[0].right_child() + 1;
   std::memcpy(changed.data() + nodes.offset + offsetof(Node, link), &link, 4);
-  CHECK(load_changed(changed).rfind(path + ": point tree: node 0: right child " + std::to_string(link), 0) ==
-        0);
+  for (const kdspace::Verify verify : {kdspace::Verify::full, kdspace::Verify::safety})
+    CHECK(load_changed(changed, verify)
+              .rfind(path + ": point tree: node 0: right child " + std::to_string(link), 0) == 0);
   write_bytes(path, bytes);
   require_same_nodes(io::load_point_tree<float>(path), tree);
-  require_same_nodes(io::load_point_tree<float>(path, io::LoadMode::map, 1), tree);
+  require_same_nodes(io::load_point_tree<float>(path, io::LoadMode::map, kdspace::Verify::safety, 1), tree);
+  require_same_nodes(io::load_point_tree<float>(path, io::LoadMode::map, kdspace::Verify::full, 1), tree);
 }
 
 TEST_CASE("index: the check's wide kernels decide as the baseline loops do", "[index]") {

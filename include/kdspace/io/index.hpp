@@ -199,7 +199,8 @@ auto load_beside_checksums(const IndexFile& file, const std::vector<SectionCheck
 
 template <class T, int Dim, class Metric>
 PointTree<T, Dim, Metric> point_tree_of(const std::shared_ptr<const IndexFile>& file,
-                                        kdspace::detail::CheckCompanion* companion, unsigned threads = 2) {
+                                        kdspace::detail::CheckCompanion* companion, Verify verify,
+                                        unsigned threads = 2) {
   detail::expect_header(*file, {IndexKind::point_tree}, detail::scalar_of<T>(), detail::metric_of<Metric>(),
                         Dim == Dynamic ? 0 : static_cast<std::size_t>(Dim));
   auto parts = detail::tree_sections<T>(file, 0, detail::read_point_tree_params(*file));
@@ -208,6 +209,7 @@ PointTree<T, Dim, Metric> point_tree_of(const std::shared_ptr<const IndexFile>& 
                std::to_string(parts.order.size()));
   parts.companion = companion;
   parts.check_threads = threads;
+  parts.verify = verify;
   try {
     return PointTree<T, Dim, Metric>(std::move(parts), detail::metric_from<Metric>(*file));
   } catch (const Error& e) {
@@ -228,9 +230,13 @@ void save(const std::string& path, const PointTree<T, Dim, Metric>& tree) {
   w.write(path);
 }
 
+/// `verify` (params.hpp): Verify::safety checks what keeps every query in bounds, Verify::full also
+/// that the answers are brute force's over the file's points whoever wrote it (a pass over every
+/// coordinate; for files from elsewhere). The checksums are verified either way.
 template <class T, int Dim = Dynamic, class Metric = L2>
-PointTree<T, Dim, Metric> load_point_tree(const std::shared_ptr<const IndexFile>& file) {
-  return detail::point_tree_of<T, Dim, Metric>(file, nullptr);
+PointTree<T, Dim, Metric> load_point_tree(const std::shared_ptr<const IndexFile>& file,
+                                          Verify verify = Verify::safety) {
+  return detail::point_tree_of<T, Dim, Metric>(file, nullptr, verify);
 }
 
 /// Loads a point tree from a file opened with Checksums::deferred, whose checksums its structural check
@@ -239,18 +245,19 @@ PointTree<T, Dim, Metric> load_point_tree(const std::shared_ptr<const IndexFile>
 /// more (kdspace::detail::parallel_tree_check; the check divides in two, no more).
 template <class T, int Dim = Dynamic, class Metric = L2>
 PointTree<T, Dim, Metric> load_point_tree_deferred(const std::shared_ptr<const IndexFile>& file,
-                                                   unsigned threads = 2) {
+                                                   Verify verify = Verify::safety, unsigned threads = 2) {
   return detail::load_beside_checksums(
       *file, detail::point_tree_readers(*file, static_cast<std::size_t>(file->info().dim) * sizeof(T)),
       [&](kdspace::detail::CheckCompanion* checksums) {
-        return detail::point_tree_of<T, Dim, Metric>(file, checksums, threads);
+        return detail::point_tree_of<T, Dim, Metric>(file, checksums, verify, threads);
       });
 }
 
 template <class T, int Dim = Dynamic, class Metric = L2>
 PointTree<T, Dim, Metric> load_point_tree(const std::string& path, LoadMode mode = LoadMode::map,
-                                          unsigned threads = 2) {
-  return load_point_tree_deferred<T, Dim, Metric>(IndexFile::open(path, mode, Checksums::deferred), threads);
+                                          Verify verify = Verify::safety, unsigned threads = 2) {
+  return load_point_tree_deferred<T, Dim, Metric>(IndexFile::open(path, mode, Checksums::deferred), verify,
+                                                  threads);
 }
 
 // ---- DynamicPointTree ----------------------------------------------------------------------------------

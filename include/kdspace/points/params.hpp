@@ -20,6 +20,21 @@ enum class PositionRule {
   midpoint,          ///< middle of the node's points' extent (their bounding box): never an empty side
 };
 
+/// How much of a tree from outside (an index file) is checked before it is searched
+/// (io::load_point_tree). Either way every section's checksum is verified first, so a file changed
+/// by accident (a flipped bit, a truncation, a wrong version, type or dimension) is refused.
+enum class Verify {
+  /// What keeps every query inside the arrays and finite: node links in depth-first order, no path
+  /// deeper than 256, split axes below the dimension and split bounds ordered, leaves that tile the
+  /// rows, and point indices below n. A file whose checksums were recomputed after a change may then answer other than brute
+  /// force over its points, but never reads out of bounds, loops or returns an index past n.
+  safety,
+  /// Besides, what makes the answers those of brute force over the file's own points whatever wrote
+  /// the file: every point inside the cells its leaf lies under, the indices a permutation,
+  /// identical-point leaves identical. A pass over every coordinate and a mark an index.
+  full,
+};
+
 struct BuildParams {
   AxisRule axis = AxisRule::max_spread;
   /// The midpoint of the points' extent: one pass over a node's points per split (the build is

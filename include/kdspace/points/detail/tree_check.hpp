@@ -10,6 +10,11 @@
 // points in ascending index order, and an index array that is a permutation of [0, n). A tree that passes
 // cannot make a query read out of bounds, recurse without end, or lose a neighbour: its answers are those of
 // brute force over its points. It runs in O(n * dim + nodes), one pass over the points.
+//
+// With PointTreeParts::verify = Verify::safety (what a load asks for by default: the file's
+// checksums are verified beside it) it checks only what keeps a search inside the arrays and
+// finite: the nodes, the leaves' ranges and the indices below n, not the points nor whether the
+// indices repeat. A pass over the order and one over the nodes; the points are not read.
 #pragma once
 
 #include <algorithm>
@@ -58,6 +63,7 @@ struct PointTreeParts {
   CheckCompanion* companion = nullptr;  ///< work the check runs beside (not owned; used while it runs)
   unsigned check_threads = 2;           ///< 1: the check runs on the calling thread alone
   bool wide_kernels = true;  ///< false: the baseline loops alone, even where AVX2 runs (tests compare them)
+  Verify verify = Verify::full;  ///< how much the check establishes (params.hpp)
 };
 
 /// What the check works out on the way: the figures a PointTree keeps besides its arrays.
@@ -74,7 +80,11 @@ template <class T>
 class TreeChecker {
  public:
   explicit TreeChecker(const PointTreeParts<T>& p)
-      : p_(p), n_(p.order.size()), dim_(p.dim), kernels_(p.wide_kernels && tree_check_kernels()) {}
+      : p_(p),
+        n_(p.order.size()),
+        dim_(p.dim),
+        full_(p.verify == Verify::full),
+        kernels_(p.wide_kernels && tree_check_kernels()) {}
 
   TreeShape run() {
     if (dim_ == 0) fail("dimension 0");
@@ -128,6 +138,7 @@ class TreeChecker {
     CheckCompanion* companion = nullptr;
     std::size_t rows_ready = 0, nodes_ready = 0;  // what the companion has made ready to read
     std::vector<std::uint64_t> seen;              // the order's values of its rows, as bits (mark_order)
+    bool out_of_range = false;                    // Verify::safety: a value of its rows' order >= n
     std::vector<Frame> stack = std::vector<Frame>(max_tree_depth + 1);  // visit's: one frame a level
   };
 
@@ -149,7 +160,7 @@ class TreeChecker {
     walk.lo.resize(dim_ + 1);  // a padding coordinate: the 3-D check loads four
     walk.hi.resize(dim_ + 1);
     walk.companion = companion;
-    walk.seen.assign(n_ / 64 + 1, 0);
+    if (full_) walk.seen.assign(n_ / 64 + 1, 0);
     visit(walk, 0);
     mark_order(walk, 0, n_);
     if (companion) companion->help();
@@ -159,7 +170,7 @@ class TreeChecker {
     if (walk.next_point != n_)
       fail("the leaves hold points [0, " + std::to_string(walk.next_point) + "), expected [0, " +
            std::to_string(n_) + ")");
-    if (!all_seen(walk.seen)) fail_order();
+    if (full_ ? !all_seen(walk.seen) : walk.out_of_range) fail_order();
     return walk.shape;
   }
 
@@ -221,7 +232,7 @@ class TreeChecker {
       walk.hi.resize(dim_ + 1);
       walk.companion = p_.companion;
       walk.next_point = w == 0 ? 0 : split_point;
-      walk.seen.assign(n_ / 64 + 1, 0);
+      if (full_) walk.seen.assign(n_ / 64 + 1, 0);
       for (Subtree& s : subtrees[w]) {
         walk.next_node = s.root;
         std::copy(s.lo.begin(), s.lo.end(), walk.lo.begin());
@@ -257,10 +268,18 @@ class TreeChecker {
     if (expected != nodes || path_at != path.size() || at[0] != subtrees[0].size() ||
         at[1] != subtrees[1].size() || walks[0].next_point != split_point || walks[1].next_point != n_)
       fail("pieces out of order");
+    if (!full_) {
+      if (walks[0].out_of_range || walks[1].out_of_range) fail("an index of the order is out of range");
+      return shape_of(walks);
+    }
     // Between them the walks' rows hold every index: n values, none missing, none twice.
     std::vector<std::uint64_t>& seen = walks[0].seen;
     for (std::size_t w = 0; w < seen.size(); ++w) seen[w] |= walks[1].seen[w];
     if (!all_seen(seen)) fail("the order is no permutation");
+    return shape_of(walks);
+  }
+
+  static TreeShape shape_of(const Walk (&walks)[2]) {
     TreeShape shape;
     shape.depth = std::max(walks[0].shape.depth, walks[1].shape.depth);
     shape.leaves = walks[0].shape.leaves + walks[1].shape.leaves;
@@ -282,6 +301,7 @@ class TreeChecker {
   // another out. (A pass of its own, not a part of each leaf's visit: mixed into the leaves' checks,
   // its scattered writes slowed them more than it saved.)
   void mark_order(Walk& walk, std::size_t begin, std::size_t end) const {
+    if (!full_) return check_order_range(walk, begin, end);
     const std::uint32_t* order = p_.order.data();
     std::uint64_t* bits = walk.seen.data();
     const auto n = static_cast<std::uint32_t>(n_);
@@ -310,13 +330,28 @@ class TreeChecker {
     }
   }
 
-  // The order is no permutation: names the first index out of range or given twice.
+  // Verify::safety: sets walk.out_of_range when a value of the order of rows [begin, end) is n or
+  // more, a block at a time as the companion makes them ready (a loop the compiler vectorizes).
+  void check_order_range(Walk& walk, std::size_t begin, std::size_t end) const {
+    const std::uint32_t* order = p_.order.data();
+    const auto n = static_cast<std::uint32_t>(n_);
+    unsigned out = 0;
+    for (std::size_t i = begin; i < end;) {
+      const std::size_t ready =
+          walk.companion ? std::clamp(walk.companion->ready(check_rows, walk.id, i + 1), i + 1, end) : end;
+      for (; i < ready; ++i) out |= static_cast<unsigned>(order[i] >= n);
+    }
+    walk.out_of_range = out != 0;
+  }
+
+  // The order is no permutation (Verify::full) or holds a value out of range: names the first index
+  // out of range or (Verify::full) given twice.
   [[noreturn]] void fail_order() const {
     std::vector<std::uint64_t> seen(n_ / 64 + 1, 0);
     for (std::size_t i = 0; i < n_; ++i) {
       const std::uint32_t v = p_.order[i];
       const std::uint64_t bit = std::uint64_t{1} << (v & 63);
-      if (v >= n_ || (seen[v >> 6] & bit) != 0)
+      if (v >= n_ || (full_ && (seen[v >> 6] & bit) != 0))
         fail("index " + std::to_string(i) + " of the point order is " + std::to_string(v) +
              (v >= n_ ? " (out of range)" : " (given twice)"));
       seen[v >> 6] |= bit;
@@ -328,6 +363,7 @@ class TreeChecker {
   // node in storage order (depth first): a loop over the nodes with a stack of the inner nodes above
   // the one visited, instead of a call a node.
   void visit(Walk& walk, std::size_t depth) {
+    if (!full_) return visit_links(walk, depth);
 #if defined(KDSPACE_AVX2_DISPATCH)
     if constexpr (std::is_same_v<T, float>)
       if (dim_ == 3 && kernels_ && visit3(walk, depth)) return;
@@ -375,6 +411,44 @@ class TreeChecker {
     }
   }
 
+  // Verify::safety: visit() without the cells, so without the points: the same walk over the nodes
+  // (links, depth, split axes and bounds, the leaves' ranges), with the same messages, keeping of
+  // each inner node above only its id and depth.
+  void visit_links(Walk& walk, std::size_t depth) {
+    const PointNode<T>* nodes = p_.nodes.data();
+    const std::size_t node_count = p_.nodes.size();
+    struct Above {
+      std::uint32_t id, depth;
+    };
+    Above stack[max_tree_depth + 2];  // a frame a level: depth <= max_tree_depth below
+    std::size_t top = 0;
+    for (;;) {
+      const std::size_t id = walk.next_node++;
+      if (id >= node_count) fail("a right child lies past the last node");
+      if (id >= walk.nodes_ready && walk.companion)
+        walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
+      if (depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
+      const PointNode<T>& node = nodes[id];
+      if (!node.is_leaf()) {
+        if (node.axis() >= dim_)
+          fail_node(id, "split axis " + std::to_string(node.axis()) + " is not below the dimension");
+        if (!(node.left_max <= node.right_min))  // false too when either is NaN
+          fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) +
+                            ", right_min " + std::to_string(node.right_min) + ")");
+        stack[top++] = {static_cast<std::uint32_t>(id), static_cast<std::uint32_t>(depth)};
+        ++depth;
+        continue;
+      }
+      leaf_range(walk, id, node, depth);
+      if (top == 0) return;
+      const Above up = stack[--top];
+      if (nodes[up.id].right_child() != walk.next_node)
+        fail_node(up.id, "right child " + std::to_string(nodes[up.id].right_child()) + ", expected " +
+                             std::to_string(walk.next_node));
+      depth = std::size_t{up.depth} + 1;
+    }
+  }
+
 #if defined(KDSPACE_AVX2_DISPATCH)
   // visit() for a 3-D float tree in one AVX2 loop (tree_check_walk3.hpp): true, with walk advanced
   // as visit() advances it, or false where visit() would throw (walk then unchanged).
@@ -406,7 +480,8 @@ class TreeChecker {
   }
 #endif
 
-  void visit_leaf(Walk& walk, std::size_t id, const PointNode<T>& leaf, std::size_t depth) {
+  // A leaf's rows are the next ones, and within the points.
+  void leaf_range(Walk& walk, std::size_t id, const PointNode<T>& leaf, std::size_t depth) const {
     const std::size_t first = leaf.first(), count = leaf.count();
     if (first != walk.next_point || count > n_ - first)
       fail_node(id, "leaf holds points [" + std::to_string(first) + ", " + std::to_string(first + count) +
@@ -415,6 +490,11 @@ class TreeChecker {
     walk.next_point += count;
     walk.shape.depth = std::max(walk.shape.depth, depth);
     ++walk.shape.leaves;
+  }
+
+  void visit_leaf(Walk& walk, std::size_t id, const PointNode<T>& leaf, std::size_t depth) {
+    leaf_range(walk, id, leaf, depth);
+    const std::size_t first = leaf.first(), count = leaf.count();
     if (first + count > walk.rows_ready && walk.companion)
       walk.rows_ready = walk.companion->ready(check_rows, walk.id, first + count);
     const T* rows = p_.points.data() + first * dim_;
@@ -488,6 +568,7 @@ class TreeChecker {
 
   const PointTreeParts<T>& p_;
   std::size_t n_, dim_;
+  bool full_;                      // Verify::full
   [[maybe_unused]] bool kernels_;  // tree_check_kernels(), read once (unused without AVX2 dispatch)
 };
 
