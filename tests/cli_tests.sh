@@ -528,6 +528,14 @@ if expect_ok "knn --index" knn --index tree.kdx --query query.csv -k 5 --out ids
     cmp -s ids.ivecs index-ids.ivecs && cmp -s dist.fvecs index-dist.fvecs; then pass "knn --index writes what building in the run writes"
   else fail "knn --index writes what building in the run writes" "outputs differ"; fi
 fi
+if expect_ok "knn --index --verify full" knn --index tree.kdx --verify full --query query.csv -k 5 --out ids.ivecs \
+  --distances dist.fvecs && cmp -s ids.ivecs index-ids.ivecs && cmp -s dist.fvecs index-dist.fvecs; then
+  pass "knn --index --verify full writes what the default load writes"
+else fail "knn --index --verify full writes what the default load writes" "outputs differ"; fi
+expect_error "knn --verify: an unknown level" 2 "--verify most: expected safety or full" -- \
+  knn --index tree.kdx --verify most --query query.csv -k 5 --out ids.ivecs
+expect_error "knn --verify without --index" 2 "--verify applies to --index" -- \
+  knn --base base.csv --verify full --query query.csv -k 5 --out ids.ivecs
 if expect_ok "index --metric l1 --leaf 2" index --base base.csv --out l1.kdx --metric l1 --leaf 2 &&
   expect_ok "radius --index" radius --index l1.kdx --query query.csv -r 4 --out ids.ivecs --distances dist.fvecs --stats; then
   check_results "radius --index (l1) equals brute force" radius l1 4 base.csv query.csv

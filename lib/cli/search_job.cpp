@@ -72,6 +72,9 @@ const char* const index_usage =
     R"(  --index INDEX.kdx    or a saved index of them (kdspace index), memory-mapped: the same answers as
                        building it in the run (ids after updates: those kdspace index gave); its
                        build options and metric are those it was saved with
+  --verify safety|full how much of a point tree index is checked before it is searched: safety
+                       (default) its checksums and what keeps the search in bounds; full also every
+                       point against its cell and the order (for files another program wrote)
 )";
 
 const char* const stats_usage =
@@ -86,6 +89,7 @@ const char* const index_stats_usage =
 
 std::vector<OptionSpec> option_specs(Mode mode, const SearchCommand& command) {
   std::vector<OptionSpec> specs = {{"--base"},        {"--index", true, command.index_refused_because},
+                                   {"--verify", true, command.index_refused_because},
                                    {"--query"},       {"--out"},
                                    {"--distances"},   {"--threads"},
                                    {"--stats", false}};
@@ -187,6 +191,12 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
   job.self = o.has("--self");
   if (o.has("--index")) {
     job.index = o.required("--index");
+    if (o.has("--verify")) {
+      const std::string verify = o.required("--verify");
+      if (verify != "safety" && verify != "full")
+        throw UsageError("--verify " + verify + ": expected safety or full");
+      job.verify_full = verify == "full";
+    }
     job.checks = 0;  // the setting stored in a forest index, unless --checks or --ef says otherwise
     job.ef = 0;
     if (o.has("--base")) throw UsageError("--base and --index exclude each other");
@@ -197,6 +207,7 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
       if (built.empty() && o.has(option)) built = option;
     if (!built.empty()) throw UsageError(built + " applies when building; " + job.index + " was built with its own");
   } else {
+    if (o.has("--verify")) throw UsageError("--verify applies to --index");
     job.base = o.required("--base");
   }
   if (job.self && o.has("--query"))
