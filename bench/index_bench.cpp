@@ -282,7 +282,8 @@ Tree3 build_tree(const std::vector<float>& base, std::size_t n, unsigned threads
 }
 
 Tree3 load_tree(const std::string& path, unsigned threads) {
-  return kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, kdspace::Verify::safety, threads);
+  return kdspace::io::load_point_tree<float>(path, kdspace::io::LoadMode::map, kdspace::Verify::safety,
+                                             threads);
 }
 
 // In the child: one build of the parent's points, or one mapped load of `path`, on `threads`; prints

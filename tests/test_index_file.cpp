@@ -155,18 +155,18 @@ TEMPLATE_TEST_CASE("index: a saved point tree loads, mapped or read, with the sa
         const std::string path = tmp.file("tree.kdx");
         io::save(path, built);
         for (auto mode : {io::LoadMode::map, io::LoadMode::read})
-        for (auto verify : {kdspace::Verify::safety, kdspace::Verify::full}) {
-          const auto loaded = io::load_point_tree<T>(path, mode, verify);
-          REQUIRE(loaded.nodes().borrowed());
-          REQUIRE(loaded.size() == n);
-          REQUIRE(loaded.depth() == built.depth());
-          REQUIRE(loaded.leaf_count() == built.leaf_count());
-          REQUIRE(loaded.params().position == position);
-          REQUIRE(loaded.params().axis == kdspace::AxisRule::cycle);
-          REQUIRE(loaded.params().leaf_size == 5);
-          require_same_nodes(loaded, built);
-          require_same_answers(loaded, built, queries);
-        }
+          for (auto verify : {kdspace::Verify::safety, kdspace::Verify::full}) {
+            const auto loaded = io::load_point_tree<T>(path, mode, verify);
+            REQUIRE(loaded.nodes().borrowed());
+            REQUIRE(loaded.size() == n);
+            REQUIRE(loaded.depth() == built.depth());
+            REQUIRE(loaded.leaf_count() == built.leaf_count());
+            REQUIRE(loaded.params().position == position);
+            REQUIRE(loaded.params().axis == kdspace::AxisRule::cycle);
+            REQUIRE(loaded.params().leaf_size == 5);
+            require_same_nodes(loaded, built);
+            require_same_answers(loaded, built, queries);
+          }
       }
     }
   }
@@ -345,9 +345,9 @@ TEST_CASE(
     }
   }
   CHECK(refused > 1000);
-  CHECK(refused_by_both > 500);  // the header, the section table, the nodes, the order's range
+  CHECK(refused_by_both > 500);      // the header, the section table, the nodes, the order's range
   CHECK(refused_by_both < refused);  // and points moved out of their cells, which only Verify::full reads
-  CHECK(loaded > 100);  // changes of coordinates that keep the tree sound
+  CHECK(loaded > 100);               // changes of coordinates that keep the tree sound
 }
 
 TEST_CASE("index: a large file, checked in chunks on two threads, still catches every damaged chunk",
@@ -408,7 +408,8 @@ TEST_CASE("index: a point order that is no permutation is named, in a tree check
     std::memcpy(changed.data() + order.offset + 4 * i, &value, 4);
     io::reseal_index_bytes(changed);
     write_bytes(path, changed);
-    const std::string message = error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify); });
+    const std::string message =
+        error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify); });
     CHECK(message == error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify, 1); }));
     return message;
   };
@@ -466,12 +467,14 @@ TEST_CASE(
     return node_array.size();
   };
   // The same message whether the check runs on two threads or on one (threads 1).
-  auto load_changed = [&](std::vector<unsigned char> changed, kdspace::Verify verify = kdspace::Verify::full) {
+  auto load_changed = [&](std::vector<unsigned char> changed,
+                          kdspace::Verify verify = kdspace::Verify::full) {
     io::reseal_index_bytes(changed);
     write_bytes(path, changed);
     const std::string alone =
         error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify, 1); });
-    const std::string message = error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify); });
+    const std::string message =
+        error_message([&] { io::load_point_tree<float>(path, io::LoadMode::map, verify); });
     CHECK(alone == message);
     return message;
   };

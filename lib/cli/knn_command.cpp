@@ -423,10 +423,8 @@ int search_tree_index(const SearchJob& job, const std::shared_ptr<const io::Inde
     return search_tree<T, Metric>(job, tree, queries, origin);
   };
   if (file->info().kind == io::IndexKind::point_tree)
-    return load_and_search([&] {
-      return io::load_point_tree_deferred<T, Dynamic, Metric>(file,
-                                                              job.verify_full ? Verify::full : Verify::safety);
-    });
+    return load_and_search(
+        [&] { return io::load_point_tree_deferred<T, Dynamic, Metric>(file, job.verify); });
   return load_and_search([&] {
     return io::load_with_checksums(
         file, [](const auto& f) { return io::load_dynamic_point_tree<T, Dynamic, Metric>(f); });

@@ -195,7 +195,7 @@ SearchJob parse_job(Mode mode, const std::vector<std::string>& args, const Searc
       const std::string verify = o.required("--verify");
       if (verify != "safety" && verify != "full")
         throw UsageError("--verify " + verify + ": expected safety or full");
-      job.verify_full = verify == "full";
+      job.verify = verify == "full" ? Verify::full : Verify::safety;
     }
     job.checks = 0;  // the setting stored in a forest index, unless --checks or --ef says otherwise
     job.ef = 0;

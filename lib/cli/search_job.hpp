@@ -37,7 +37,7 @@ struct SearchJob {
   Mode mode = Mode::knn;
   std::string base, query, out, distances;
   std::string index;  ///< a saved index answers instead of a tree built over base (then empty)
-  bool verify_full = false;  ///< --verify full: a point tree index is loaded with Verify::full
+  Verify verify = Verify::safety;  ///< --verify: how much of a point tree index its load checks
   BuildParams build;
   std::string metric = "l2";
   std::size_t k = 0;

@@ -26,8 +26,9 @@ enum class PositionRule {
 enum class Verify {
   /// What keeps every query inside the arrays and finite: node links in depth-first order, no path
   /// deeper than 256, split axes below the dimension and split bounds ordered, leaves that tile the
-  /// rows, and point indices below n. A file whose checksums were recomputed after a change may then answer other than brute
-  /// force over its points, but never reads out of bounds, loops or returns an index past n.
+  /// rows, and point indices below n. A file whose checksums were recomputed after a change may then
+  /// answer other than brute force over its points, but never reads out of bounds, loops or returns
+  /// an index past n.
   safety,
   /// Besides, what makes the answers those of brute force over the file's own points whatever wrote
   /// the file: every point inside the cells its leaf lies under, the indices a permutation,

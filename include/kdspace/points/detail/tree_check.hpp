@@ -370,23 +370,15 @@ class TreeChecker {
         // Else a problem: the walk below starts the subtree over and names it.
 #endif
     const PointNode<T>* nodes = p_.nodes.data();
-    const std::size_t node_count = p_.nodes.size();
     Frame* stack = walk.stack.data();
     std::size_t top = 0;  // frames in use: the inner nodes above the next one
     for (;;) {
-      const std::size_t id = walk.next_node++;
       const std::size_t node_depth = depth + top;
-      if (id >= node_count) fail("a right child lies past the last node");
-      if (id >= walk.nodes_ready && walk.companion)
-        walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
-      if (node_depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
+      const std::size_t id = take_node(walk, node_depth);
       const PointNode<T>& node = nodes[id];
       if (!node.is_leaf()) {  // down its left side, in the cell below left_max
+        check_split(id, node);
         const std::size_t axis = node.axis();
-        if (axis >= dim_) fail_node(id, "split axis " + std::to_string(axis) + " is not below the dimension");
-        if (!(node.left_max <= node.right_min))  // false too when either is NaN
-          fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) +
-                            ", right_min " + std::to_string(node.right_min) + ")");
         stack[top++] = {id, axis, walk.lo[axis], walk.hi[axis], false};
         walk.hi[axis] = std::min(walk.hi[axis], node.left_max);
         continue;
@@ -399,9 +391,7 @@ class TreeChecker {
         if (!f.right) {
           walk.hi[f.axis] = f.saved_hi;
           const PointNode<T>& up = nodes[f.id];
-          if (up.right_child() != walk.next_node)
-            fail_node(f.id, "right child " + std::to_string(up.right_child()) + ", expected " +
-                                std::to_string(walk.next_node));
+          check_right_child(f.id, up, walk.next_node);
           walk.lo[f.axis] = std::max(walk.lo[f.axis], up.right_min);
           f.right = true;
           break;
@@ -411,30 +401,48 @@ class TreeChecker {
     }
   }
 
+  // Both walks' steps. The walk's next node, at `depth`: in the array, its bytes made ready by the
+  // companion, not too deep; its id.
+  std::size_t take_node(Walk& walk, std::size_t depth) const {
+    const std::size_t id = walk.next_node++;
+    if (id >= p_.nodes.size()) fail("a right child lies past the last node");
+    if (id >= walk.nodes_ready && walk.companion)
+      walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
+    if (depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
+    return id;
+  }
+
+  // An inner node's split: an axis below the dimension, ordered bounds.
+  void check_split(std::size_t id, const PointNode<T>& node) const {
+    if (node.axis() >= dim_)
+      fail_node(id, "split axis " + std::to_string(node.axis()) + " is not below the dimension");
+    if (!(node.left_max <= node.right_min))  // false too when either is NaN
+      fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) +
+                        ", right_min " + std::to_string(node.right_min) + ")");
+  }
+
+  // Once an inner node's left subtree is walked, its right child must be the next node.
+  static void check_right_child(std::size_t id, const PointNode<T>& node, std::size_t next_node) {
+    if (node.right_child() != next_node)
+      fail_node(id, "right child " + std::to_string(node.right_child()) + ", expected " +
+                        std::to_string(next_node));
+  }
+
   // Verify::safety: visit() without the cells, so without the points: the same walk over the nodes
   // (links, depth, split axes and bounds, the leaves' ranges), with the same messages, keeping of
   // each inner node above only its id and depth.
   void visit_links(Walk& walk, std::size_t depth) {
     const PointNode<T>* nodes = p_.nodes.data();
-    const std::size_t node_count = p_.nodes.size();
     struct Above {
       std::uint32_t id, depth;
     };
     Above stack[max_tree_depth + 2];  // a frame a level: depth <= max_tree_depth below
     std::size_t top = 0;
     for (;;) {
-      const std::size_t id = walk.next_node++;
-      if (id >= node_count) fail("a right child lies past the last node");
-      if (id >= walk.nodes_ready && walk.companion)
-        walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
-      if (depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
+      const std::size_t id = take_node(walk, depth);
       const PointNode<T>& node = nodes[id];
       if (!node.is_leaf()) {
-        if (node.axis() >= dim_)
-          fail_node(id, "split axis " + std::to_string(node.axis()) + " is not below the dimension");
-        if (!(node.left_max <= node.right_min))  // false too when either is NaN
-          fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) +
-                            ", right_min " + std::to_string(node.right_min) + ")");
+        check_split(id, node);
         stack[top++] = {static_cast<std::uint32_t>(id), static_cast<std::uint32_t>(depth)};
         ++depth;
         continue;
@@ -442,9 +450,7 @@ class TreeChecker {
       leaf_range(walk, id, node, depth);
       if (top == 0) return;
       const Above up = stack[--top];
-      if (nodes[up.id].right_child() != walk.next_node)
-        fail_node(up.id, "right child " + std::to_string(nodes[up.id].right_child()) + ", expected " +
-                             std::to_string(walk.next_node));
+      check_right_child(up.id, nodes[up.id], walk.next_node);
       depth = std::size_t{up.depth} + 1;
     }
   }
