@@ -205,6 +205,7 @@ class Stream {
     // stores.
     capacity_ = n + 8;
     s_.origin.resize(3 * capacity_);
+    s_.direction.resize(3 * capacity_);
     s_.inverse.resize(3 * capacity_);
     s_.best_t.resize(capacity_);
     s_.best_bound.resize(capacity_);
@@ -233,6 +234,7 @@ class Stream {
       const std::size_t slot = count_++;
       for (int a = 0; a < 3; ++a) {
         s_.origin[a * capacity_ + slot] = r.origin[a];
+        s_.direction[a * capacity_ + slot] = rays_[ids[i]].direction[a];
         s_.inverse[a * capacity_ + slot] = r.inverse[a];
       }
       s_.best_t[slot] = range_.t_max;
@@ -246,6 +248,10 @@ class Stream {
   }
 
 #if defined(KDSPACE_AVX2_DISPATCH)
+  /// How far ahead of its group of eight admit_avx asks for the rays it will read (two groups: the
+  /// rays arrive from the last-level cache or memory in time, measured on rays_walk).
+  static constexpr std::size_t prefetch_rays_ahead = 16;
+
   /// admit's loop eight rays at a time, as far as whole groups of eight go; returns the rays done.
   /// The same arithmetic as TraversalRay and clip_widened lane by lane (min and max with their
   /// operands in std::min's and std::max's order); a stream's rays have no zero direction
@@ -260,13 +266,22 @@ class Stream {
     const __m256 one = _mm256_set1_ps(1.0f);
     std::size_t i = 0;
     for (; i + 8 <= n; i += 8) {
+      // An octant's rays lie scattered in the batch (ascending ids, random gaps), where the
+      // processor's prefetchers cannot follow them: ask for the rays two groups ahead.
+      const std::size_t prefetch_end = std::min(n, i + prefetch_rays_ahead + 8);
+      for (std::size_t ahead = i + prefetch_rays_ahead; ahead < prefetch_end; ++ahead) {
+        const char* ray_bytes = reinterpret_cast<const char*>(rays_ + ids[ahead]);
+        _mm_prefetch(ray_bytes, _MM_HINT_T0);
+        _mm_prefetch(ray_bytes + sizeof(Ray) - 1, _MM_HINT_T0);
+      }
       const __m256i id = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(ids + i));
       const __m256i offset = _mm256_mullo_epi32(_mm256_sub_epi32(id, first), _mm256_set1_epi32(6));
-      __m256 origin[3], inverse[3];
+      __m256 origin[3], direction[3], inverse[3];
       __m256 t_lo = _mm256_set1_ps(range_.t_min), t_hi = _mm256_set1_ps(range_.t_max);
       for (int a = 0; a < 3; ++a) {
         origin[a] = _mm256_i32gather_ps(words + a, offset, 4);
-        inverse[a] = _mm256_div_ps(one, _mm256_i32gather_ps(words + 3 + a, offset, 4));
+        direction[a] = _mm256_i32gather_ps(words + 3 + a, offset, 4);
+        inverse[a] = _mm256_div_ps(one, direction[a]);
         const __m256 t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(bounds.lo[a]), origin[a]), inverse[a]);
         const __m256 t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(bounds.hi[a]), origin[a]), inverse[a]);
         const __m256 enter = _mm256_min_ps(t1, t0), leave = _mm256_max_ps(t1, t0);
@@ -278,6 +293,7 @@ class Stream {
       const std::size_t m = count_;
       for (int a = 0; a < 3; ++a) {
         _mm256_storeu_ps(s_.origin.data() + a * capacity_ + m, _mm256_permutevar8x32_ps(origin[a], order));
+        _mm256_storeu_ps(s_.direction.data() + a * capacity_ + m, _mm256_permutevar8x32_ps(direction[a], order));
         _mm256_storeu_ps(s_.inverse.data() + a * capacity_ + m, _mm256_permutevar8x32_ps(inverse[a], order));
       }
       _mm256_storeu_ps(s_.enter.data() + m, _mm256_permutevar8x32_ps(t_lo, order));
@@ -297,6 +313,17 @@ class Stream {
     return i;
   }
 #endif
+
+  /// The ray of `slot` as the batch gave it, from the stream's own arrays (the batch's copy lies
+  /// farther away in memory: read again for each exact test, it missed the caches).
+  Ray batch_ray(std::uint32_t slot) const {
+    Ray ray;
+    for (int a = 0; a < 3; ++a) {
+      ray.origin[a] = s_.origin[a * capacity_ + slot];
+      ray.direction[a] = s_.direction[a * capacity_ + slot];
+    }
+    return ray;
+  }
 
   TraversalRay<float> ray_at(std::uint32_t slot) const {
     TraversalRay<float> r;
@@ -333,7 +360,7 @@ class Stream {
     if constexpr (Wide) descent = descent_ray(r);
 #endif
     BestHit<float> best = best_at(slot);
-    walk<float, AnyHit, Wide>(view_, rays_[s_.ray_of[slot]], r, descent, StackEntry<float>{node, t_entry, t_exit},
+    walk<float, AnyHit, Wide>(view_, batch_ray(slot), r, descent, StackEntry<float>{node, t_entry, t_exit},
                               range_.t_min, best, stats_);
     keep(slot, best);
   }
@@ -364,7 +391,7 @@ class Stream {
       const TraversalRay<float> r = ray_at(slot);
       BestHit<float> best = best_at(slot);
       std::optional<PreparedRay> exact;
-      test_leaf<float, AnyHit, Wide>(view_, leaf, rays_[s_.ray_of[slot]], r, range_.t_min, exact, best, stats_);
+      test_leaf<float, AnyHit, Wide>(view_, leaf, batch_ray(slot), r, range_.t_min, exact, best, stats_);
       keep(slot, best);
     }
   }
@@ -425,7 +452,7 @@ class Stream {
           passed &= passed - 1;
           const std::uint32_t ray = slots[ray_lane];
           double t_near_exact = range_.t_min, t_far_exact = s_.best_t[ray];
-          if (!clip_to_box(box_in_lane(*block, lane), PreparedRay(rays_[s_.ray_of[ray]]), t_near_exact,
+          if (!clip_to_box(box_in_lane(*block, lane), PreparedRay(batch_ray(ray)), t_near_exact,
                            t_far_exact))
             continue;
           const auto box = static_cast<std::int32_t>(ids[done + lane]);

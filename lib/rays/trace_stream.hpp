@@ -15,7 +15,7 @@ namespace kdspace::detail {
 struct StreamScratch {
   std::vector<std::uint32_t> keys;         ///< per ray of a batch's chunk: its direction's signs
   std::vector<std::uint32_t> ids;          ///< the chunk's rays for the streams, octant after octant
-  std::vector<float> origin, inverse;      ///< by axis, then by ray: [axis * capacity + ray]
+  std::vector<float> origin, direction, inverse;  ///< by axis, then by ray: [axis * capacity + ray]
   std::vector<double> best_t;              ///< per ray
   std::vector<float> best_bound;           ///< per ray: best_t rounded up; -inf once an any-hit ray is done
   std::vector<std::int32_t> best_box;      ///< per ray
