@@ -293,7 +293,8 @@ class Stream {
       const std::size_t m = count_;
       for (int a = 0; a < 3; ++a) {
         _mm256_storeu_ps(s_.origin.data() + a * capacity_ + m, _mm256_permutevar8x32_ps(origin[a], order));
-        _mm256_storeu_ps(s_.direction.data() + a * capacity_ + m, _mm256_permutevar8x32_ps(direction[a], order));
+        _mm256_storeu_ps(s_.direction.data() + a * capacity_ + m,
+                         _mm256_permutevar8x32_ps(direction[a], order));
         _mm256_storeu_ps(s_.inverse.data() + a * capacity_ + m, _mm256_permutevar8x32_ps(inverse[a], order));
       }
       _mm256_storeu_ps(s_.enter.data() + m, _mm256_permutevar8x32_ps(t_lo, order));
@@ -432,8 +433,13 @@ class Stream {
     const LeafBlock* block = view_.blocks + leaf.first() / 4;
     const std::uint32_t* ids = view_.references + leaf.first();
     for (std::uint32_t done = 0; done < count; done += 4, ++block) {
+      // The block's boxes are filtered against the rays' bounds at its start, all four before one
+      // branch on the result: a bound lowered by a hit in the block leaves the later boxes' filters
+      // looser, never tighter, and the double test decides alone. Lanes past count (a leaf's last
+      // block repeats its last box) pass nothing.
       const unsigned lanes = std::min(4u, count - done);
-      for (unsigned lane = 0; lane < lanes; ++lane) {
+      std::uint32_t passed_by_lane = 0;  // eight bits (rays) a lane
+      for (unsigned lane = 0; lane < 4; ++lane) {
         __m256 t_near = t_low, t_far = bound;
         for (int a = 0; a < 3; ++a) {
           const __m256 t0 =
@@ -443,31 +449,32 @@ class Stream {
           t_near = _mm256_max_ps(t0, t_near);  // as block_pair_candidates: the second operand for a NaN
           t_far = _mm256_min_ps(t1, t_far);
         }
-        unsigned passed = may_hit_from_nonnegative8(t_near, t_far);  // t_near >= t_min >= 0
-        if (passed == 0) continue;
-        alignas(32) float bound_of[8];
-        _mm256_store_ps(bound_of, bound);
-        do {
-          const auto ray_lane = static_cast<unsigned>(__builtin_ctz(passed));
-          passed &= passed - 1;
-          const std::uint32_t ray = slots[ray_lane];
-          double t_near_exact = range_.t_min, t_far_exact = s_.best_t[ray];
-          if (!clip_to_box(box_in_lane(*block, lane), PreparedRay(batch_ray(ray)), t_near_exact,
-                           t_far_exact))
-            continue;
-          const auto box = static_cast<std::int32_t>(ids[done + lane]);
-          if constexpr (AnyHit) {
-            s_.best_t[ray] = t_near_exact;
-            s_.best_box[ray] = box;
-            s_.best_bound[ray] = bound_of[ray_lane] = minus_infinity;
-          } else if (t_near_exact < s_.best_t[ray] || s_.best_box[ray] == Hit::none || box < s_.best_box[ray]) {
-            s_.best_t[ray] = t_near_exact;
-            s_.best_box[ray] = box;
-            s_.best_bound[ray] = bound_of[ray_lane] = round_up<float>(t_near_exact);
-          }
-        } while (passed != 0);
-        bound = _mm256_load_ps(bound_of);
+        passed_by_lane |= may_hit_from_nonnegative8(t_near, t_far) << (8 * lane);  // t_near >= t_min >= 0
       }
+      passed_by_lane &= lanes == 4 ? ~0u : (1u << (8 * lanes)) - 1;
+      if (passed_by_lane == 0) continue;
+      alignas(32) float bound_of[8];
+      _mm256_store_ps(bound_of, bound);
+      for (; passed_by_lane != 0; passed_by_lane &= passed_by_lane - 1) {
+        const auto bit = static_cast<unsigned>(__builtin_ctz(passed_by_lane));
+        const unsigned lane = bit / 8, ray_lane = bit % 8;
+        if (AnyHit && bound_of[ray_lane] == minus_infinity) continue;  // done at a box before
+        const std::uint32_t ray = slots[ray_lane];
+        double t_near_exact = range_.t_min, t_far_exact = s_.best_t[ray];
+        if (!clip_to_box(box_in_lane(*block, lane), PreparedRay(batch_ray(ray)), t_near_exact, t_far_exact))
+          continue;
+        const auto box = static_cast<std::int32_t>(ids[done + lane]);
+        if constexpr (AnyHit) {
+          s_.best_t[ray] = t_near_exact;
+          s_.best_box[ray] = box;
+          s_.best_bound[ray] = bound_of[ray_lane] = minus_infinity;
+        } else if (t_near_exact < s_.best_t[ray] || s_.best_box[ray] == Hit::none || box < s_.best_box[ray]) {
+          s_.best_t[ray] = t_near_exact;
+          s_.best_box[ray] = box;
+          s_.best_bound[ray] = bound_of[ray_lane] = round_up<float>(t_near_exact);
+        }
+      }
+      bound = _mm256_load_ps(bound_of);
     }
   }
 #endif
