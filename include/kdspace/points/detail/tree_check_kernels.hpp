@@ -2,7 +2,8 @@
 // sets, chosen at run time: 3-D float points against their cell eight at a time with AVX2 (also the
 // leaf test of the AVX2 walk, tree_check_walk3.hpp), and the
 // point order's bits set with BMI2's shifts after an AVX2 range check of the values (no clamp a
-// value): about a third fewer instructions a value. They decide exactly what the baseline loops
+// value): about a third fewer instructions a value; that range check alone is Verify::safety's
+// check of the order. They decide exactly what the baseline loops
 // decide; the tests run both (KDSPACE_NO_AVX2, ctest entry `baseline_without_avx2_index`).
 #pragma once
 
@@ -101,12 +102,9 @@ __attribute__((target("avx2"))) inline bool points3_inside_avx2(const float* row
   return points3_in_cell_avx2(rows, count, _mm_loadu_ps(lo), _mm_loadu_ps(hi));
 }
 
-/// Sets bit v of `bits` for each value v of values [0, count) and returns true, when every value is
-/// below n; else returns false (having set none). The values are first checked eight at a time (they
-/// are in the first-level cache: the checksum has just read them), so the marking needs no clamp.
-__attribute__((target("avx2,bmi2"))) inline bool mark_values_avx2(const std::uint32_t* values,
-                                                                  std::size_t count, std::uint32_t n,
-                                                                  std::uint64_t* bits) {
+/// The largest of values [0, count), eight at a time (0 for none).
+__attribute__((target("avx2"))) inline std::uint32_t largest_value_avx2(const std::uint32_t* values,
+                                                                        std::size_t count) {
   __m256i most = _mm256_setzero_si256();
   std::size_t i = 0;
   for (; i + 8 <= count; i += 8)
@@ -116,8 +114,18 @@ __attribute__((target("avx2,bmi2"))) inline bool mark_values_avx2(const std::uin
   std::uint32_t largest = 0;
   for (std::uint32_t v : lanes) largest = v > largest ? v : largest;
   for (; i < count; ++i) largest = values[i] > largest ? values[i] : largest;
-  if (count != 0 && largest >= n) return false;
-  for (i = 0; i + 4 <= count; i += 4)  // four independent updates a step
+  return largest;
+}
+
+/// Sets bit v of `bits` for each value v of values [0, count) and returns true, when every value is
+/// below n; else returns false (having set none). The values are first checked eight at a time (they
+/// are in the first-level cache: the checksum has just read them), so the marking needs no clamp.
+__attribute__((target("avx2,bmi2"))) inline bool mark_values_avx2(const std::uint32_t* values,
+                                                                  std::size_t count, std::uint32_t n,
+                                                                  std::uint64_t* bits) {
+  if (count != 0 && largest_value_avx2(values, count) >= n) return false;
+  std::size_t i = 0;
+  for (; i + 4 <= count; i += 4)  // four independent updates a step
     for (std::size_t j = i; j < i + 4; ++j) bits[values[j] >> 6] |= std::uint64_t{1} << (values[j] & 63);
   for (; i < count; ++i) bits[values[i] >> 6] |= std::uint64_t{1} << (values[i] & 63);
   return true;
