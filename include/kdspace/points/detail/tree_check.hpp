@@ -416,24 +416,37 @@ class TreeChecker {
     if (id >= p_.nodes.size()) fail("a right child lies past the last node");
     if (id >= walk.nodes_ready && walk.companion)
       walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
-    if (depth > max_tree_depth) fail_node(id, "deeper than " + std::to_string(max_tree_depth));
+    if (depth > max_tree_depth) fail_depth(id);
     return id;
   }
 
-  // An inner node's split: an axis below the dimension, ordered bounds.
+  // An inner node's split: an axis below the dimension, ordered bounds (false too when either is
+  // NaN).
   void check_split(std::size_t id, const PointNode<T>& node) const {
-    if (node.axis() >= dim_)
-      fail_node(id, "split axis " + std::to_string(node.axis()) + " is not below the dimension");
-    if (!(node.left_max <= node.right_min))  // false too when either is NaN
-      fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) +
-                        ", right_min " + std::to_string(node.right_min) + ")");
+    if (node.axis() >= dim_ || !(node.left_max <= node.right_min)) fail_split(id, node);
   }
 
   // Once an inner node's left subtree is walked, its right child must be the next node.
   static void check_right_child(std::size_t id, const PointNode<T>& node, std::size_t next_node) {
-    if (node.right_child() != next_node)
-      fail_node(id, "right child " + std::to_string(node.right_child()) + ", expected " +
-                        std::to_string(next_node));
+    if (node.right_child() != next_node) fail_right_child(id, node, next_node);
+  }
+
+  // The messages of the checks above, out of line: the checks run at every node, and a message's
+  // strings inline would keep them from being inlined into the walks.
+  [[noreturn]] [[gnu::noinline, gnu::cold]] static void fail_depth(std::size_t id) {
+    fail_node(id, "deeper than " + std::to_string(max_tree_depth));
+  }
+  [[noreturn]] [[gnu::noinline, gnu::cold]] void fail_split(std::size_t id, const PointNode<T>& node) const {
+    if (node.axis() >= dim_)
+      fail_node(id, "split axis " + std::to_string(node.axis()) + " is not below the dimension");
+    fail_node(id, "split bounds are not ordered (left_max " + std::to_string(node.left_max) + ", right_min " +
+                      std::to_string(node.right_min) + ")");
+  }
+  [[noreturn]] [[gnu::noinline, gnu::cold]] static void fail_right_child(std::size_t id,
+                                                                         const PointNode<T>& node,
+                                                                         std::size_t next_node) {
+    fail_node(
+        id, "right child " + std::to_string(node.right_child()) + ", expected " + std::to_string(next_node));
   }
 
   // Verify::safety: visit() without the cells, so without the points: the same walk over the nodes
@@ -497,13 +510,18 @@ class TreeChecker {
   // A leaf's rows are the next ones, and within the points.
   void leaf_range(Walk& walk, std::size_t id, const PointNode<T>& leaf, std::size_t depth) const {
     const std::size_t first = leaf.first(), count = leaf.count();
-    if (first != walk.next_point || count > n_ - first)
-      fail_node(id, "leaf holds points [" + std::to_string(first) + ", " + std::to_string(first + count) +
-                        "), expected them to start at " + std::to_string(walk.next_point) + " and end by " +
-                        std::to_string(n_));
+    if (first != walk.next_point || count > n_ - first) fail_leaf_range(walk, id, leaf);
     walk.next_point += count;
     walk.shape.depth = std::max(walk.shape.depth, depth);
     ++walk.shape.leaves;
+  }
+
+  [[noreturn]] [[gnu::noinline, gnu::cold]] void fail_leaf_range(const Walk& walk, std::size_t id,
+                                                                 const PointNode<T>& leaf) const {
+    const std::size_t first = leaf.first(), count = leaf.count();
+    fail_node(id, "leaf holds points [" + std::to_string(first) + ", " + std::to_string(first + count) +
+                      "), expected them to start at " + std::to_string(walk.next_point) + " and end by " +
+                      std::to_string(n_));
   }
 
   void visit_leaf(Walk& walk, std::size_t id, const PointNode<T>& leaf, std::size_t depth) {
