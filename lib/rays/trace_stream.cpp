@@ -402,8 +402,8 @@ class Stream {
   /// ray the float filter's parameters (block_pair_candidates' operations in its order), compared by
   /// may_hit_from_nonnegative (a range whose t_min >= 0: at_leaf sends no other), and the same double
   /// test, box after box in the leaf's order. A ray's bound drops as its best hit does, so a box is
-  /// filtered with the bound its predecessors left (never tighter than its double test, which
-  /// decides alone), and an any-hit ray stops at the first box it hits.
+  /// filtered with the bound the leaf's earlier blocks left (never tighter than its double test,
+  /// which decides alone), and an any-hit ray stops at the first box it hits.
   /// The fewest rays leaf_by_boxes takes (of its eight lanes).
   static constexpr std::size_t group_min_rays = 5;
 
