@@ -119,6 +119,30 @@ TEST_CASE("index: the CRC-32C of two ranges combines into the CRC-32C of both", 
     REQUIRE(io::detail::crc32c_combine(a, b, data.size() - split) ==
             io::detail::crc32c(data.data(), data.size()));
   }
+  // Every split of a short range, and random ones of the long one.
+  for (std::size_t split = 0; split <= 300; ++split) {
+    CAPTURE(split);
+    REQUIRE(io::detail::crc32c_combine(io::detail::crc32c(data.data(), split),
+                                       io::detail::crc32c(data.data() + split, 300 - split),
+                                       300 - split) == io::detail::crc32c(data.data(), 300));
+  }
+  for (int round = 0; round < 200; ++round) {
+    const std::size_t split = rng() % (data.size() + 1);
+    CAPTURE(split);
+    REQUIRE(io::detail::crc32c_combine(io::detail::crc32c(data.data(), split),
+                                       io::detail::crc32c(data.data() + split, data.size() - split),
+                                       data.size() - split) == io::detail::crc32c(data.data(), data.size()));
+  }
+}
+
+TEST_CASE("index: combining CRC-32Cs agrees with the bitwise multiplication, lengths up to 2^63", "[index]") {
+  std::mt19937_64 rng(11);
+  for (int round = 0; round < 2000; ++round) {
+    const auto a = static_cast<std::uint32_t>(rng()), b = static_cast<std::uint32_t>(rng());
+    const std::size_t length = rng() >> (rng() % 64);  // lengths of every size
+    CAPTURE(a, b, length);
+    REQUIRE(io::detail::crc32c_combine(a, b, length) == io::detail::crc32c_combine_portable(a, b, length));
+  }
 }
 
 TEST_CASE("index: the CRC-32C extended piece by piece is the CRC-32C of the whole", "[index]") {

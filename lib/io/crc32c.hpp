@@ -24,6 +24,9 @@ std::uint32_t crc32c_combine(std::uint32_t crc_a, std::uint32_t crc_b, std::size
 /// The same checksum from the lookup tables alone (for tests of the fast path).
 std::uint32_t crc32c_portable(const void* data, std::size_t size);
 
+/// crc32c_combine by bitwise multiplications alone (for tests of the pclmul path).
+std::uint32_t crc32c_combine_portable(std::uint32_t crc_a, std::uint32_t crc_b, std::size_t length_b);
+
 /// Whether crc32c() runs on the processor's crc32 instruction (else on lookup tables).
 bool crc32c_in_hardware();
 
