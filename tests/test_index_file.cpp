@@ -410,10 +410,15 @@ TEST_CASE("index: a large file, checked in chunks on two threads, still catches 
     for (auto mode : {io::LoadMode::map, io::LoadMode::read})
       REQUIRE(error_message([&] { io::load_point_tree<float>(path, mode); }).find("checksum mismatch") !=
               std::string::npos);
+    // Checked on five threads: the tree in more pieces, each checksummed by the thread that reads it.
+    REQUIRE(error_message([&] {
+              io::load_point_tree<float>(path, io::LoadMode::map, kdspace::Verify::safety, 5);
+            }).find("checksum mismatch") != std::string::npos);
     change(at);  // back as it was
   }
   const auto loaded = io::load_point_tree<float>(path);
   require_same_nodes(loaded, tree);
+  require_same_nodes(io::load_point_tree<float>(path, io::LoadMode::map, kdspace::Verify::full, 5), tree);
 }
 
 TEST_CASE("index: a point order that is no permutation is named, in a tree checked on two threads",
@@ -683,6 +688,101 @@ TEST_CASE("index: the 3-D float check in one AVX2 loop decides as the baseline w
     }
     CHECK(refused > c.trials / 4);
     CHECK(refused < c.trials);  // some changes leave a sound tree
+  }
+}
+
+TEST_CASE("index: the check in pieces decides as the one-thread check, on any number of threads",
+          "[index][errors][threads]") {
+  // Large trees (3-D and 5-D; uniform, clustered and duplicate-heavy points; leaves of up to 3 and up
+  // to 24 points), sound and with a node's field, a coordinate or an order value changed at random:
+  // checked on 2, 3, 5 and 8 threads (the tree cut into subtrees the threads take in turn), the
+  // verdict, the message and the shape are the one-thread check's, at both verification levels.
+  using Node = kdspace::detail::PointNode<float>;
+  struct Case {
+    Shape shape;
+    std::size_t n, dim, leaf_size;
+  };
+  std::mt19937 rng(29);
+  for (const Case& c : {Case{Shape::uniform, 140000, 3, 24}, Case{Shape::clustered, 150000, 3, 3},
+                        Case{Shape::duplicates, 140000, 3, 24}, Case{Shape::clustered, 140000, 5, 8}}) {
+    CAPTURE(kdspace_test::name(c.shape), c.n, c.dim, c.leaf_size);
+    REQUIRE(c.n >= kdspace::detail::parallel_tree_check);
+    const auto rows = kdspace_test::make_points<float>(c.shape, c.n, c.dim, 6);
+    kdspace::BuildParams params;
+    params.leaf_size = c.leaf_size;
+    const PointTree<float> tree(rows.data(), c.n, c.dim, params);
+    const auto parts = tree.parts();
+    std::vector<float> points(parts.points.begin(), parts.points.end());
+    std::vector<std::uint32_t> order(parts.order.begin(), parts.order.end());
+    std::vector<Node> nodes(parts.nodes.begin(), parts.nodes.end());
+    const auto verdict = [&](unsigned threads, kdspace::Verify verify) {
+      kdspace::detail::PointTreeParts<float> p{
+          c.dim,
+          parts.params,
+          kdspace::detail::Storage<float>::borrow(points.data(), points.size()),
+          kdspace::detail::Storage<std::uint32_t>::borrow(order.data(), order.size()),
+          kdspace::detail::Storage<Node>::borrow(nodes.data(), nodes.size()),
+          parts.root_lo,
+          parts.root_hi,
+          nullptr};
+      p.check_threads = threads;
+      p.verify = verify;
+      try {
+        const kdspace::detail::TreeShape shape = kdspace::detail::check_point_tree(p);
+        return "depth " + std::to_string(shape.depth) + ", leaves " + std::to_string(shape.leaves);
+      } catch (const kdspace::Error& e) {
+        return std::string(e.what());
+      }
+    };
+    const std::string sound = "depth " + std::to_string(tree.depth()) + ", leaves " + std::to_string(tree.leaf_count());
+    for (const kdspace::Verify verify : {kdspace::Verify::full, kdspace::Verify::safety})
+      for (unsigned threads : {1u, 2u, 3u, 5u, 8u}) {
+        CAPTURE(threads);
+        REQUIRE(verdict(threads, verify) == sound);
+      }
+    int refused = 0;
+    const int trials = 40;
+    for (int trial = 0; trial < trials; ++trial) {
+      const auto pick = [&](std::size_t size) {
+        return std::uniform_int_distribution<std::size_t>(0, size - 1)(rng);
+      };
+      const std::vector<float> kept_points = points;
+      const std::vector<std::uint32_t> kept_order = order;
+      const std::vector<Node> kept_nodes = nodes;
+      Node& node = nodes[pick(nodes.size())];
+      switch (rng() % 6) {
+        case 0:
+          node.left_max = node.right_min + 1.0f;
+          break;
+        case 1:
+          node.link = static_cast<std::uint32_t>(node.link + (rng() % 5) - 2);
+          break;
+        case 2:
+          node.info ^= std::uint32_t{1} << (rng() % 32);
+          break;
+        case 3:
+          node.info = static_cast<std::uint32_t>(rng() % 4);
+          break;
+        case 4:
+          points[pick(points.size())] = std::numeric_limits<float>::infinity();
+          break;
+        default:
+          order[pick(order.size())] = rng() % 2 ? order[pick(order.size())] : static_cast<std::uint32_t>(c.n);
+      }
+      CAPTURE(trial);
+      for (const kdspace::Verify verify : {kdspace::Verify::full, kdspace::Verify::safety}) {
+        const std::string alone = verdict(1, verify);
+        for (unsigned threads : {2u, 3u, 5u, 8u}) {
+          CAPTURE(threads);
+          REQUIRE(verdict(threads, verify) == alone);
+        }
+        refused += alone == sound ? 0 : 1;
+      }
+      points = kept_points;
+      order = kept_order;
+      nodes = kept_nodes;
+    }
+    CHECK(refused > trials / 2);
   }
 }
 

@@ -307,17 +307,18 @@ std::size_t check_parts_on_two_threads(const BoxTreeParts& p) {
     }
   detail::CheckCompanion* companion = p.companion;
   if (companion) {
-    companion->split(detail::box_check_boxes, n / 2);
-    companion->split(detail::box_check_references, middle_ref);
+    companion->pieces(detail::box_check_boxes, {0, n / 2});
+    companion->pieces(detail::box_check_references, {0, middle_ref});
   }
   std::vector<std::uint64_t> referenced[2];
   std::size_t depth = 0;
   auto share = [&](int w) {
+    const auto piece = static_cast<std::size_t>(w);  // the companion's piece of each array: the thread's half
     // Boxes: a block at a time, as the companion makes them ready.
     const std::size_t box_end = w == 0 ? n / 2 : n;
     for (std::size_t i = w == 0 ? 0 : n / 2; i < box_end;) {
       const std::size_t ready =
-          companion ? std::clamp(companion->ready(detail::box_check_boxes, w, i + 1), i + 1, box_end)
+          companion ? std::clamp(companion->ready(detail::box_check_boxes, piece, i + 1), i + 1, box_end)
                     : box_end;
       if (!boxes_inside(p.boxes.data(), i, ready, p.bounds)) fail_parts("a box");
       i = ready;
@@ -330,7 +331,7 @@ std::size_t check_parts_on_two_threads(const BoxTreeParts& p) {
       if (!node.is_leaf()) continue;
       const std::size_t first = node.first(), count = node.count(), padded = (count + 3) / 4 * 4;
       if (companion && first + padded > ready)
-        ready = companion->ready(detail::box_check_references, w, first + padded);
+        ready = companion->ready(detail::box_check_references, piece, first + padded);
       check_leaf(p, v, first, count, referenced[w].data());
     }
     if (companion) companion->help();

@@ -424,7 +424,7 @@ int search_tree_index(const SearchJob& job, const std::shared_ptr<const io::Inde
   };
   if (file->info().kind == io::IndexKind::point_tree)
     return load_and_search(
-        [&] { return io::load_point_tree_deferred<T, Dynamic, Metric>(file, job.verify); });
+        [&] { return io::load_point_tree_deferred<T, Dynamic, Metric>(file, job.verify, job.threads); });
   return load_and_search([&] {
     return io::load_with_checksums(
         file, [](const auto& f) { return io::load_dynamic_point_tree<T, Dynamic, Metric>(f); });

@@ -387,7 +387,7 @@ IndexFile::ChecksumPass::ChecksumPass(const IndexFile& file, std::vector<const S
     } while (at < sections[i].length);
   }
   crcs_.resize(chunks_.size());
-  for (std::size_t k = 0; k < streamed_.size(); ++k) split(k, std::numeric_limits<std::uint64_t>::max());
+  for (std::size_t k = 0; k < streamed_.size(); ++k) pieces(k, {0});
 }
 
 void IndexFile::ChecksumPass::run() {
@@ -396,22 +396,29 @@ void IndexFile::ChecksumPass::run() {
         io::detail::crc32c(file_.bytes_ + chunks_[c].offset, static_cast<std::size_t>(chunks_[c].length));
 }
 
-void IndexFile::ChecksumPass::split(std::size_t k, std::uint64_t at) {
+void IndexFile::ChecksumPass::pieces(std::size_t k, const std::vector<std::uint64_t>& starts) {
   if (k >= streamed_.size() || !streamed_[k].section) return;
   Streamed& s = streamed_[k];
-  at = std::min(at, s.section->length);
-  s.streams[0] = {0, 0, at, 0};
-  s.streams[1] = {at, at, s.section->length, 0};
+  const std::uint64_t length = s.section->length;
+  s.streams.assign(std::max<std::size_t>(starts.size(), 1), Stream{});
+  std::uint64_t begin = 0;
+  for (std::size_t p = 0; p < s.streams.size(); ++p) {
+    const std::uint64_t end =
+        p + 1 < starts.size() ? std::clamp(starts[p + 1], begin, length) : length;
+    s.streams[p].begin = s.streams[p].done = begin;
+    s.streams[p].end = end;
+    begin = end;
+  }
 }
 
 // A stream runs this far ahead of the reads it serves: 12 KiB, enough for the CRC's fast loops (three
 // 4 KiB streams, or folding) and well inside the first-level cache, where the walk then finds them.
 constexpr std::uint64_t stream_step_bytes = 3 * 4096;
 
-std::uint64_t IndexFile::ChecksumPass::stream(std::size_t k, int walk, std::uint64_t end) {
-  if (k >= streamed_.size() || !streamed_[k].section) return end;
+std::uint64_t IndexFile::ChecksumPass::stream(std::size_t k, std::size_t piece, std::uint64_t end) {
+  if (k >= streamed_.size() || !streamed_[k].section || piece >= streamed_[k].streams.size()) return end;
   const SectionEntry& section = *streamed_[k].section;
-  Stream& s = streamed_[k].streams[walk];
+  Stream& s = streamed_[k].streams[piece];
   if (end <= s.done) return s.done;
   const std::uint64_t to = std::min(s.end, std::max(end, s.done + stream_step_bytes));
   s.crc = io::detail::crc32c_extend(s.crc, file_.bytes_ + section.offset + s.done,
@@ -434,10 +441,12 @@ void IndexFile::ChecksumPass::finish() {
                                        [&](const Streamed& s) { return s.section == &sections[i]; });
     if (streamed != streamed_.end()) {
       const auto k = static_cast<std::size_t>(streamed - streamed_.begin());
-      for (int walk : {0, 1}) stream(k, walk, streamed->streams[walk].end);
-      const Stream& second = streamed->streams[1];
-      crc = io::detail::crc32c_combine(streamed->streams[0].crc, second.crc,
-                                       static_cast<std::size_t>(second.end - second.begin));
+      for (std::size_t p = 0; p < streamed->streams.size(); ++p) {
+        const Stream& piece = streamed->streams[p];
+        stream(k, p, piece.end);
+        crc = p == 0 ? piece.crc
+                     : io::detail::crc32c_combine(crc, piece.crc, static_cast<std::size_t>(piece.end - piece.begin));
+      }
     } else {
       crc = crcs_[c++];
       for (; c < chunks_.size() && chunks_[c].section == i; ++c)
@@ -457,17 +466,21 @@ std::vector<const SectionEntry*> SectionChecksums::sections_of(const std::vector
 SectionChecksums::SectionChecksums(const IndexFile& file, const std::vector<Reader>& readers)
     : readers_(readers), pass_(file, sections_of(readers)) {}
 
-void SectionChecksums::split(std::size_t array, std::size_t first) {
+void SectionChecksums::pieces(std::size_t array, const std::vector<std::size_t>& starts) {
   for (std::size_t k = 0; k < readers_.size(); ++k)
-    if (readers_[k].array == array) pass_.split(k, std::uint64_t{first} * readers_[k].item_bytes);
+    if (readers_[k].array == array) {
+      std::vector<std::uint64_t> bytes(starts.size());
+      for (std::size_t p = 0; p < starts.size(); ++p) bytes[p] = std::uint64_t{starts[p]} * readers_[k].item_bytes;
+      pass_.pieces(k, bytes);
+    }
 }
 
-std::size_t SectionChecksums::ready(std::size_t array, int walk, std::size_t end) {
+std::size_t SectionChecksums::ready(std::size_t array, std::size_t piece, std::size_t end) {
   // The least of what the array's sections have ready (each runs a step ahead of `end`).
   std::size_t ready_to = std::numeric_limits<std::size_t>::max();
   for (std::size_t k = 0; k < readers_.size(); ++k)
     if (readers_[k].array == array && readers_[k].section) {
-      const std::uint64_t done = pass_.stream(k, walk, std::uint64_t{end} * readers_[k].item_bytes);
+      const std::uint64_t done = pass_.stream(k, piece, std::uint64_t{end} * readers_[k].item_bytes);
       ready_to = std::min(ready_to, static_cast<std::size_t>(done / readers_[k].item_bytes));
     }
   return ready_to == std::numeric_limits<std::size_t>::max() ? end : ready_to;

@@ -142,7 +142,7 @@ std::size_t level_for(std::size_t n, std::size_t base_capacity);
 /// calling thread takes its share of what is left of them (IndexFile::ChecksumPass), so that the
 /// two threads share the whole work. The structural checks are safe on any bytes. A checksum error
 /// wins over load's (it explains any other). The loaders that take a path work this way, but for the
-/// point tree's and the box tree's, whose checks share their own two threads with the checksums
+/// point tree's and the box tree's, whose checks share their own threads with the checksums
 /// (load_point_tree_deferred, load_box_tree_deferred).
 template <class Load>
 auto load_with_checksums(const std::shared_ptr<const IndexFile>& file, Load load) {
@@ -241,8 +241,9 @@ PointTree<T, Dim, Metric> load_point_tree(const std::shared_ptr<const IndexFile>
 
 /// Loads a point tree from a file opened with Checksums::deferred, whose checksums its structural check
 /// takes on its own threads (what load_point_tree(path) does once it has opened the file). `threads`:
-/// 1 checks on the calling thread alone; 2 or more on two threads for a tree of 131,072 points or
-/// more (kdspace::detail::parallel_tree_check; the check divides in two, no more).
+/// 1 checks on the calling thread alone; 0 (all hardware threads) or 2 or more on that many threads for
+/// a tree of 131,072 points or more (kdspace::detail::parallel_tree_check), which take its subtrees in
+/// turn, each checksumming the bytes it reads.
 template <class T, int Dim = Dynamic, class Metric = L2>
 PointTree<T, Dim, Metric> load_point_tree_deferred(const std::shared_ptr<const IndexFile>& file,
                                                    Verify verify = Verify::safety, unsigned threads = 2) {

@@ -39,10 +39,11 @@
 // ranges in range, no cycles, and for point trees every point inside the splits above it) before a
 // query can run, while a second thread checks the sections' checksums in chunks that the first shares
 // once done (structural checks are safe on any bytes); both pass, or no index. A large point tree's
-// or box tree's check runs on two threads of its own, each reading its half of the arrays it reads
-// front to back (a point tree's nodes, points and order; a box tree's boxes, references and leaf
-// blocks), which it checksums just before it checks them (SectionChecksums: each byte read from
-// memory once); then both share the other sections' chunks. Every problem throws
+// or box tree's check runs on two threads of its own, reading the arrays it reads in pieces, each
+// front to back (a point tree's nodes, points and order, a subtree at a time, whichever thread is
+// free taking the next; a box tree's boxes, references and leaf blocks, a half a thread), which it
+// checksums just before it checks them (SectionChecksums: each byte read from memory once); then both
+// share the other sections' chunks. Every problem throws
 // kdspace::Error naming the file and what is wrong; nothing is allocated for what a header claims
 // (every length is checked against the file's size first).
 //
@@ -190,22 +191,24 @@ class IndexFile {
   /// itself whatever is left, so that it always judges every byte).
   ///
   /// Some sections may be `streamed` instead (a null entry stands for a section the file lacks: its
-  /// stream does nothing): left out of the shared chunks, each is checksummed by the two threads that
-  /// read it anyway (a point tree's walks over its nodes, points and order), each over its own range of
-  /// it (split() sets where the second begins) as it goes (stream(k, walk, end): the bytes up to `end`
-  /// of streamed section k are about to be read), so that each byte is read from memory once. finish()
-  /// checksums whatever of a section the streams did not reach, so its result never depends on how far
-  /// they got.
+  /// stream does nothing): left out of the shared chunks, each is checksummed by the threads that read
+  /// it anyway (a point tree's walks over its nodes, points and order), in the pieces they read it in
+  /// (pieces() sets them; one stream a piece, used by one thread at a time), as they go (stream(k,
+  /// piece, end): the bytes up to `end` of streamed section k are about to be read), so that each byte
+  /// is read from memory once. finish() checksums whatever of a section the streams did not reach, so
+  /// its result never depends on how far they got.
   class ChecksumPass {
    public:
     explicit ChecksumPass(const IndexFile& file, std::vector<const SectionEntry*> streamed = {});
     void run();
-    /// Stream 1 of streamed section k starts at byte `at` of it (by default at its end).
-    void split(std::size_t k, std::uint64_t at);
-    /// Stream `walk` (0 or 1; one thread each) of streamed section k checksums its range up to byte
-    /// `end` of the section, and a little beyond (a step at a time, within its range). Returns the byte
-    /// it has now reached (the end of its range once done).
-    std::uint64_t stream(std::size_t k, int walk, std::uint64_t end);
+    /// Streamed section k in pieces: piece p is bytes [starts[p], starts[p + 1]), the last one up to
+    /// the section's end (the first begins at 0 whatever starts[0]; starts are clamped to ascend
+    /// within the section). Until then a section is one piece.
+    void pieces(std::size_t k, const std::vector<std::uint64_t>& starts);
+    /// The stream of piece `piece` of streamed section k checksums its range up to byte `end` of the
+    /// section, and a little beyond (a step at a time, within its range). Returns the byte it has now
+    /// reached (the end of its range once done).
+    std::uint64_t stream(std::size_t k, std::size_t piece, std::uint64_t end);
     void finish();
 
    private:
@@ -213,14 +216,15 @@ class IndexFile {
       std::size_t section;
       std::uint64_t offset, length;
     };
-    // A range [begin, end) of a streamed section's bytes, checksummed up to `done`.
-    struct Stream {
+    // A range [begin, end) of a streamed section's bytes, checksummed up to `done`; a cache line of its
+    // own (two threads stream neighbouring pieces).
+    struct alignas(64) Stream {
       std::uint64_t begin = 0, done = 0, end = 0;
       std::uint32_t crc = 0;
     };
     struct Streamed {
       const SectionEntry* section;
-      Stream streams[2];
+      std::vector<Stream> streams;
     };
     const IndexFile& file_;
     std::vector<Chunk> chunks_;
@@ -249,8 +253,8 @@ class IndexFile {
 };
 
 /// The checksums of a file, taken beside the structural check of the tree loaded from it (a
-/// CheckCompanion): the sections the check reads front to back (its `readers`) by the two walks that
-/// read them, each range just before it is read, and the others in chunks, by whichever thread is done
+/// CheckCompanion): the sections the check reads front to back (its `readers`) by the pieces they are
+/// read in, each range just before it is read, and the others in chunks, by whichever thread is done
 /// first. finish() throws Error naming the first damaged section.
 class SectionChecksums final : public kdspace::detail::CheckCompanion {
  public:
@@ -262,8 +266,8 @@ class SectionChecksums final : public kdspace::detail::CheckCompanion {
     std::size_t item_bytes;
   };
   SectionChecksums(const IndexFile& file, const std::vector<Reader>& readers);
-  void split(std::size_t array, std::size_t first) override;
-  std::size_t ready(std::size_t array, int walk, std::size_t end) override;
+  void pieces(std::size_t array, const std::vector<std::size_t>& starts) override;
+  std::size_t ready(std::size_t array, std::size_t piece, std::size_t end) override;
   void help() override { pass_.run(); }
   void finish() { pass_.finish(); }
 

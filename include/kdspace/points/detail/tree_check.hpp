@@ -18,6 +18,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -61,7 +62,8 @@ struct PointTreeParts {
   std::vector<T> root_lo, root_hi;  ///< bounds of all points (the root cell)
   std::shared_ptr<const void> backing;
   CheckCompanion* companion = nullptr;  ///< work the check runs beside (not owned; used while it runs)
-  unsigned check_threads = 2;           ///< 1: the check runs on the calling thread alone
+  unsigned check_threads = 2;           ///< 1: the check runs on the calling thread alone; 0: on all
+                                        ///< hardware threads
   bool wide_kernels = true;  ///< false: the baseline loops alone, even where AVX2 runs (tests compare them)
   Verify verify = Verify::full;  ///< how much the check establishes (params.hpp)
 };
@@ -72,9 +74,14 @@ struct TreeShape {
   std::size_t leaves = 0;
 };
 
-/// Trees of at least this many points are checked on two threads (a thread's start costs tens of
-/// microseconds, the check a few nanoseconds a point), unless PointTreeParts::check_threads is 1.
+/// Trees of at least this many points are checked on PointTreeParts::check_threads threads (a
+/// thread's start costs tens of microseconds, the check a few nanoseconds a point).
 inline constexpr std::size_t parallel_tree_check = std::size_t{1} << 17;
+
+/// The parallel check hands out subtrees of at most 1/(tree_check_pieces_a_thread * threads) of the
+/// nodes: enough that threads which start late (a thread's start costs tens of microseconds, a
+/// sleeping processor's wake more) still find some of the tree to share, and that all finish together.
+inline constexpr std::size_t tree_check_pieces_a_thread = 8;
 
 template <class T>
 class TreeChecker {
@@ -101,9 +108,9 @@ class TreeChecker {
     for (std::size_t a = 0; a < dim_; ++a)
       if (!std::isfinite(p_.root_lo[a]) || !std::isfinite(p_.root_hi[a]) || p_.root_lo[a] > p_.root_hi[a])
         fail("bounds of coordinate " + std::to_string(a + 1) + " are not finite and ordered");
-    if (n_ >= parallel_tree_check && p_.check_threads > 1) {
+    if (n_ >= parallel_tree_check && resolve_threads(p_.check_threads) > 1) {
       try {
-        if (std::optional<TreeShape> shape = run_on_two_threads()) return *shape;
+        if (std::optional<TreeShape> shape = run_in_pieces()) return *shape;
       } catch (const Error&) {
         // Something is wrong: the one-thread check below names the first problem, as it finds it.
         return run_on_one_thread(nullptr);
@@ -126,10 +133,10 @@ class TreeChecker {
     bool right;
   };
 
-  // A depth-first walk over one subtree after another, in node order, each in its cell, checking
-  // that nodes and the leaves' points follow each other without a gap; then the order of its rows.
+  // A depth-first walk over one subtree after another, each in its cell, checking that nodes and the
+  // leaves' points follow each other without a gap; then the order of its rows.
   struct Walk {
-    int id = 0;                  // 0 or 1: which of the companion's streams it reads
+    std::size_t piece = 0;       // the companion's piece of the arrays it reads
     std::vector<T> lo, hi;       // the root cell cut by the splits above the node being visited, and
                                  // one coordinate more (unused: the 3-D check loads four at once)
     std::size_t next_node = 0;   // the node the next visit must find
@@ -142,25 +149,23 @@ class TreeChecker {
     std::vector<Frame> stack = std::vector<Frame>(max_tree_depth + 1);  // visit's: one frame a level
   };
 
-  // A subtree one walk checks whole: its root, depth and cell, and where it ends (set by the walk).
-  struct Subtree {
-    std::size_t root = 0, depth = 0;
-    std::vector<T> lo, hi;
-    std::size_t node_end = 0;
-  };
-
-  TreeShape run_on_one_thread(CheckCompanion* companion) {
-    if (companion) {
-      companion->split(check_rows, n_);
-      companion->split(check_nodes, p_.nodes.size());
-    }
+  Walk new_walk(CheckCompanion* companion) const {
     Walk walk;
-    walk.lo = p_.root_lo;
-    walk.hi = p_.root_hi;
     walk.lo.resize(dim_ + 1);  // a padding coordinate: the 3-D check loads four
     walk.hi.resize(dim_ + 1);
     walk.companion = companion;
     if (full_) walk.seen.assign(n_ / 64 + 1, 0);
+    return walk;
+  }
+
+  TreeShape run_on_one_thread(CheckCompanion* companion) {
+    if (companion) {
+      companion->pieces(check_rows, {0});
+      companion->pieces(check_nodes, {0});
+    }
+    Walk walk = new_walk(companion);
+    std::copy(p_.root_lo.begin(), p_.root_lo.end(), walk.lo.begin());
+    std::copy(p_.root_hi.begin(), p_.root_hi.end(), walk.hi.begin());
     visit(walk, 0);
     mark_order(walk, 0, n_);
     if (companion) companion->help();
@@ -174,115 +179,120 @@ class TreeChecker {
     return walk.shape;
   }
 
-  // The tree cut at a node near the middle of the node array: the path from the root down to it, the
-  // subtrees left of the path (walk 0, in node order, ending with the subtree under the path's last
-  // node when walk 1 has more), and those right of it (walk 1). Each walk then marks the order of its
-  // own rows (the seam between them is checked once, below), and helps the companion. No shape when
-  // the tree does not divide (its root is a leaf). Any problem throws, and run() starts over on one
-  // thread, whose message names it.
-  std::optional<TreeShape> run_on_two_threads() {
+  // A subtree the parallel check hands out whole: its root, depth and cell, and the first point of
+  // its leftmost leaf; then what its walk found: where its nodes and its points end.
+  struct Piece {
+    std::size_t root = 0, depth = 0, first_point = 0;
+    std::vector<T> lo, hi;
+    std::size_t node_end = 0, point_end = 0;
+  };
+
+  // The tree cut into pieces: the inner nodes whose subtrees hold more than `largest` nodes (`cut`,
+  // their splits checked here), and the subtrees below them (the pieces), both in node order. The
+  // threads take the pieces in turn from a shared counter (parallel_for), each walking a piece whole,
+  // then marking the order of its rows; a thread that starts late takes what is left, so none waits
+  // on another's share. The pieces and the cut nodes must
+  // then tile the node array and the pieces' points [0, n) in node order. No shape when the tree does
+  // not divide (its root is a leaf). Any problem throws, and run() starts over on one thread, whose
+  // message names it.
+  std::optional<TreeShape> run_in_pieces() {
     const std::size_t nodes = p_.nodes.size();
-    std::vector<Subtree> subtrees[2];
-    std::vector<Subtree> right_of_path;  // walk 1's, deepest first
-    std::vector<std::size_t> path;
-    std::vector<T> lo = p_.root_lo, hi = p_.root_hi;
-    std::size_t v = 0, end = nodes, depth = 0;
-    for (; depth < max_tree_depth; ++depth) {
-      const PointNode<T>& node = p_.nodes[v];
-      if (node.is_leaf() || end - v < nodes / 16) break;  // a sixteenth of the nodes either way: balanced
-      const std::size_t axis = node.axis(), right = node.right_child();
-      if (axis >= dim_ || !(node.left_max <= node.right_min) || !(v + 1 < right && right < end))
-        fail_node(v, "bad split");
-      path.push_back(v);
-      if (right <= nodes / 2) {  // the left subtree lies before the middle
-        subtrees[0].push_back({v + 1, depth + 1, lo, hi, 0});
-        subtrees[0].back().hi[axis] = std::min(hi[axis], node.left_max);
-        lo[axis] = std::max(lo[axis], node.right_min);
-        v = right;
-      } else {
-        right_of_path.push_back({right, depth + 1, lo, hi, 0});
-        right_of_path.back().lo[axis] = std::max(lo[axis], node.right_min);
-        hi[axis] = std::min(hi[axis], node.left_max);
-        end = right;
-        v = v + 1;
-      }
-    }
-    const std::size_t walk0_nodes = v - path.size(), walk1_nodes = nodes - end;
-    (walk0_nodes <= walk1_nodes ? subtrees[0] : subtrees[1]).push_back({v, depth, lo, hi, 0});
-    subtrees[1].insert(subtrees[1].end(), right_of_path.rbegin(), right_of_path.rend());
-    if (subtrees[0].empty() || subtrees[1].empty()) return std::nullopt;
-
-    // Walk 1 starts at the first point of its first leaf (the chain checks below confirm it).
-    std::size_t leftmost = subtrees[1].front().root;
-    for (std::size_t steps = 0; leftmost < nodes && !p_.nodes[leftmost].is_leaf(); ++steps, ++leftmost)
-      if (steps > max_tree_depth) fail("no leaf");
-    if (leftmost >= nodes || p_.nodes[leftmost].first() > n_) fail("no leaf");
-    const std::size_t split_point = p_.nodes[leftmost].first();
-
-    // Walk 0's nodes all lie before walk 1's first subtree (the path's nodes too, read above).
-    if (p_.companion) {
-      p_.companion->split(check_rows, split_point);
-      p_.companion->split(check_nodes, subtrees[1].front().root);
-    }
-    Walk walks[2];  // each thread walks a copy of its own (two walks in one cache line would share it)
-    auto share = [&](int w) {
-      Walk walk;
-      walk.id = w;
-      walk.lo.resize(dim_ + 1);  // a padding coordinate: the 3-D check loads four
-      walk.hi.resize(dim_ + 1);
-      walk.companion = p_.companion;
-      walk.next_point = w == 0 ? 0 : split_point;
-      if (full_) walk.seen.assign(n_ / 64 + 1, 0);
-      for (Subtree& s : subtrees[w]) {
-        walk.next_node = s.root;
-        std::copy(s.lo.begin(), s.lo.end(), walk.lo.begin());
-        std::copy(s.hi.begin(), s.hi.end(), walk.hi.begin());
-        visit(walk, s.depth);
-        s.node_end = walk.next_node;
-      }
-      mark_order(walk, w == 0 ? 0 : split_point, w == 0 ? split_point : n_);
-      if (p_.companion) p_.companion->help();
-      walks[w] = std::move(walk);
+    const std::size_t largest =
+        std::max<std::size_t>(nodes / (tree_check_pieces_a_thread * resolve_threads(p_.check_threads)), 1);
+    std::vector<Piece> pieces;
+    std::vector<std::size_t> cut;
+    struct Pending {
+      std::size_t root, end, depth;  // a subtree whose nodes lie in [root, end)
+      std::vector<T> lo, hi;
     };
-    fork_join([&] { share(1); }, [&] { share(0); });
-
-    // The pieces in node order, each starting where the one before ends: the path's nodes, then walk
-    // 0's subtrees and walk 1's in the order the path met them.
-    std::size_t expected = 0, path_at = 0, at[2] = {0, 0};
-    while (expected < nodes &&
-           (path_at < path.size() || at[0] < subtrees[0].size() || at[1] < subtrees[1].size())) {
-      if (path_at < path.size() && path[path_at] == expected) {
-        ++expected;
-        ++path_at;
+    std::vector<Pending> pending{{0, nodes, 0, p_.root_lo, p_.root_hi}};
+    while (!pending.empty()) {  // depth first, left before right: node order
+      Pending s = std::move(pending.back());
+      pending.pop_back();
+      const PointNode<T>& node = p_.nodes[s.root];
+      if (node.is_leaf() || s.end - s.root <= largest || s.depth >= max_tree_depth) {
+        pieces.push_back({s.root, s.depth, 0, std::move(s.lo), std::move(s.hi), 0, 0});
         continue;
       }
-      bool found = false;
-      for (int w : {0, 1})
-        if (at[w] < subtrees[w].size() && subtrees[w][at[w]].root == expected) {
-          expected = subtrees[w][at[w]++].node_end;
-          found = true;
-          break;
-        }
-      if (!found) fail("pieces out of order");
+      const std::size_t axis = node.axis(), right = node.right_child();
+      if (axis >= dim_ || !(node.left_max <= node.right_min) || !(s.root + 1 < right && right < s.end))
+        fail_node(s.root, "bad split");
+      cut.push_back(s.root);
+      Pending right_side{right, s.end, s.depth + 1, s.lo, s.hi};
+      right_side.lo[axis] = std::max(s.lo[axis], node.right_min);
+      Pending left_side{s.root + 1, right, s.depth + 1, std::move(s.lo), std::move(s.hi)};
+      left_side.hi[axis] = std::min(left_side.hi[axis], node.left_max);
+      pending.push_back(std::move(right_side));
+      pending.push_back(std::move(left_side));
     }
-    if (expected != nodes || path_at != path.size() || at[0] != subtrees[0].size() ||
-        at[1] != subtrees[1].size() || walks[0].next_point != split_point || walks[1].next_point != n_)
-      fail("pieces out of order");
+    if (pieces.size() < 2) return std::nullopt;
+
+    // Each piece starts at the first point of its leftmost leaf (the chain checks below confirm it).
+    std::vector<std::size_t> node_starts(pieces.size()), row_starts(pieces.size());
+    for (std::size_t i = 0; i < pieces.size(); ++i) {
+      std::size_t leftmost = pieces[i].root;
+      for (std::size_t steps = 0; !p_.nodes[leftmost].is_leaf(); ++steps, ++leftmost)
+        if (steps > max_tree_depth || leftmost + 1 >= nodes) fail("no leaf");
+      pieces[i].first_point = p_.nodes[leftmost].first();
+      if (pieces[i].first_point > n_ || (i > 0 && pieces[i].first_point < pieces[i - 1].first_point))
+        fail("pieces out of order");
+      node_starts[i] = i == 0 ? 0 : pieces[i].root;
+      row_starts[i] = i == 0 ? 0 : pieces[i].first_point;
+    }
+    if (p_.companion) {
+      p_.companion->pieces(check_rows, row_starts);
+      p_.companion->pieces(check_nodes, node_starts);
+    }
+
+    // Each worker walks a Walk of its own, a piece at a time (parallel_for's counter hands them out).
+    const unsigned workers =
+        static_cast<unsigned>(std::min<std::size_t>(resolve_threads(p_.check_threads), pieces.size()));
+    std::vector<Walk> walks;
+    for (unsigned w = 0; w < workers; ++w) walks.push_back(new_walk(p_.companion));
+    parallel_for(pieces.size(), workers, 1, [&](std::size_t first, std::size_t end, unsigned worker) {
+      Walk& walk = walks[worker];
+      for (std::size_t i = first; i < end; ++i) {
+        Piece& piece = pieces[i];
+        walk.piece = i;
+        walk.next_node = piece.root;
+        walk.next_point = piece.first_point;
+        walk.rows_ready = walk.nodes_ready = 0;
+        std::copy(piece.lo.begin(), piece.lo.end(), walk.lo.begin());
+        std::copy(piece.hi.begin(), piece.hi.end(), walk.hi.begin());
+        visit(walk, piece.depth);
+        piece.node_end = walk.next_node;
+        piece.point_end = walk.next_point;
+        mark_order(walk, piece.first_point, piece.point_end);
+      }
+    });
+    if (p_.companion) p_.companion->help();
+
+    // In node order, each cut node and each piece starts where the one before ends; the pieces' points
+    // follow each other from 0 to n.
+    std::size_t expected = 0, at_cut = 0, expected_point = 0;
+    for (const Piece& piece : pieces) {
+      for (; at_cut < cut.size() && cut[at_cut] == expected; ++at_cut) ++expected;
+      if (piece.root != expected || piece.first_point != expected_point) fail("pieces out of order");
+      expected = piece.node_end;
+      expected_point = piece.point_end;
+    }
+    if (expected != nodes || at_cut != cut.size() || expected_point != n_) fail("pieces out of order");
+    TreeShape shape;
+    bool out_of_range = false;
+    for (const Walk& walk : walks) {
+      shape.depth = std::max(shape.depth, walk.shape.depth);
+      shape.leaves += walk.shape.leaves;
+      out_of_range = out_of_range || walk.out_of_range;
+    }
     if (!full_) {
-      if (walks[0].out_of_range || walks[1].out_of_range) fail("an index of the order is out of range");
-      return shape_of(walks);
+      if (out_of_range) fail("an index of the order is out of range");
+      return shape;
     }
     // Between them the walks' rows hold every index: n values, none missing, none twice.
     std::vector<std::uint64_t>& seen = walks[0].seen;
-    for (std::size_t w = 0; w < seen.size(); ++w) seen[w] |= walks[1].seen[w];
+    for (std::size_t w = 1; w < walks.size(); ++w)
+      for (std::size_t word = 0; word < seen.size(); ++word) seen[word] |= walks[w].seen[word];
     if (!all_seen(seen)) fail("the order is no permutation");
-    return shape_of(walks);
-  }
-
-  static TreeShape shape_of(const Walk (&walks)[2]) {
-    TreeShape shape;
-    shape.depth = std::max(walks[0].shape.depth, walks[1].shape.depth);
-    shape.leaves = walks[0].shape.leaves + walks[1].shape.leaves;
     return shape;
   }
 
@@ -311,7 +321,7 @@ class TreeChecker {
     };
     for (std::size_t i = begin; i < end;) {
       const std::size_t ready =
-          walk.companion ? std::clamp(walk.companion->ready(check_rows, walk.id, i + 1), i + 1, end) : end;
+          walk.companion ? std::clamp(walk.companion->ready(check_rows, walk.piece, i + 1), i + 1, end) : end;
 #if defined(KDSPACE_AVX2_DISPATCH)
       if (kernels_) {
         // A value out of range: bit n, which fails the check.
@@ -339,7 +349,7 @@ class TreeChecker {
     unsigned out = 0;
     for (std::size_t i = begin; i < end;) {
       const std::size_t ready =
-          walk.companion ? std::clamp(walk.companion->ready(check_rows, walk.id, i + 1), i + 1, end) : end;
+          walk.companion ? std::clamp(walk.companion->ready(check_rows, walk.piece, i + 1), i + 1, end) : end;
 #if defined(KDSPACE_AVX2_DISPATCH)
       if (kernels_) {
         out |= static_cast<unsigned>(largest_value_avx2(order + i, ready - i) >= n);
@@ -349,7 +359,7 @@ class TreeChecker {
 #endif
       for (; i < ready; ++i) out |= static_cast<unsigned>(order[i] >= n);
     }
-    walk.out_of_range = out != 0;
+    walk.out_of_range = walk.out_of_range || out != 0;
   }
 
   // The order is no permutation (Verify::full) or holds a value out of range: names the first index
@@ -415,7 +425,7 @@ class TreeChecker {
     const std::size_t id = walk.next_node++;
     if (id >= p_.nodes.size()) fail("a right child lies past the last node");
     if (id >= walk.nodes_ready && walk.companion)
-      walk.nodes_ready = walk.companion->ready(check_nodes, walk.id, id + 1);
+      walk.nodes_ready = walk.companion->ready(check_nodes, walk.piece, id + 1);
     if (depth > max_tree_depth) fail_depth(id);
     return id;
   }
@@ -487,7 +497,7 @@ class TreeChecker {
     w.order = p_.order.data();
     w.n = n_;
     w.companion = walk.companion;
-    w.walk_id = walk.id;
+    w.piece = walk.piece;
     w.rows_array = check_rows;
     w.nodes_array = check_nodes;
     w.next_node = walk.next_node;
@@ -528,7 +538,7 @@ class TreeChecker {
     leaf_range(walk, id, leaf, depth);
     const std::size_t first = leaf.first(), count = leaf.count();
     if (first + count > walk.rows_ready && walk.companion)
-      walk.rows_ready = walk.companion->ready(check_rows, walk.id, first + count);
+      walk.rows_ready = walk.companion->ready(check_rows, walk.piece, first + count);
     const T* rows = p_.points.data() + first * dim_;
     const T* lo = walk.lo.data();
     const T* hi = walk.hi.data();

@@ -23,7 +23,7 @@ struct Walk3 {
   const std::uint32_t* order = nullptr;  // n values
   std::size_t n = 0;
   CheckCompanion* companion = nullptr;
-  int walk_id = 0;
+  std::size_t piece = 0;  // the companion's piece the walk reads
   std::size_t rows_array = 0, nodes_array = 0;  // the companion's numbers for rows and nodes
   std::size_t next_node = 0, next_point = 0, rows_ready = 0, nodes_ready = 0;
   std::size_t depth = 0, leaves = 0;  // deepest leaf so far, leaves so far
@@ -66,7 +66,7 @@ __attribute__((target("avx2"))) bool walk3_avx2(Walk3& w, std::size_t depth, con
   for (;;) {
     if (id >= readable) {
       if (id >= node_count) return false;
-      nodes_ready = companion->ready(w.nodes_array, w.walk_id, id + 1);
+      nodes_ready = companion->ready(w.nodes_array, w.piece, id + 1);
       readable = nodes_ready < node_count ? nodes_ready : node_count;
     }
     const PointNode<float>& node = nodes[id];
@@ -87,7 +87,7 @@ __attribute__((target("avx2"))) bool walk3_avx2(Walk3& w, std::size_t depth, con
     next_point += count;
     if (next_point > n) return false;
     deepest = depth > deepest ? depth : deepest;
-    if (next_point > rows_ready) rows_ready = companion->ready(w.rows_array, w.walk_id, next_point);
+    if (next_point > rows_ready) rows_ready = companion->ready(w.rows_array, w.piece, next_point);
     const float* rows = w.points + 3 * first;
     if (!points3_in_cell_avx2(rows, count, lo, hi)) return false;
     if (node.all_identical())
