@@ -734,7 +734,8 @@ TEST_CASE("index: the check in pieces decides as the one-thread check, on any nu
         return std::string(e.what());
       }
     };
-    const std::string sound = "depth " + std::to_string(tree.depth()) + ", leaves " + std::to_string(tree.leaf_count());
+    const std::string sound =
+        "depth " + std::to_string(tree.depth()) + ", leaves " + std::to_string(tree.leaf_count());
     for (const kdspace::Verify verify : {kdspace::Verify::full, kdspace::Verify::safety})
       for (unsigned threads : {1u, 2u, 3u, 5u, 8u}) {
         CAPTURE(threads);

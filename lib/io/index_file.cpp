@@ -403,8 +403,7 @@ void IndexFile::ChecksumPass::pieces(std::size_t k, const std::vector<std::uint6
   s.streams.assign(std::max<std::size_t>(starts.size(), 1), Stream{});
   std::uint64_t begin = 0;
   for (std::size_t p = 0; p < s.streams.size(); ++p) {
-    const std::uint64_t end =
-        p + 1 < starts.size() ? std::clamp(starts[p + 1], begin, length) : length;
+    const std::uint64_t end = p + 1 < starts.size() ? std::clamp(starts[p + 1], begin, length) : length;
     s.streams[p].begin = s.streams[p].done = begin;
     s.streams[p].end = end;
     begin = end;
@@ -445,7 +444,8 @@ void IndexFile::ChecksumPass::finish() {
         const Stream& piece = streamed->streams[p];
         stream(k, p, piece.end);
         crc = p == 0 ? piece.crc
-                     : io::detail::crc32c_combine(crc, piece.crc, static_cast<std::size_t>(piece.end - piece.begin));
+                     : io::detail::crc32c_combine(crc, piece.crc,
+                                                  static_cast<std::size_t>(piece.end - piece.begin));
       }
     } else {
       crc = crcs_[c++];
@@ -470,7 +470,8 @@ void SectionChecksums::pieces(std::size_t array, const std::vector<std::size_t>&
   for (std::size_t k = 0; k < readers_.size(); ++k)
     if (readers_[k].array == array) {
       std::vector<std::uint64_t> bytes(starts.size());
-      for (std::size_t p = 0; p < starts.size(); ++p) bytes[p] = std::uint64_t{starts[p]} * readers_[k].item_bytes;
+      for (std::size_t p = 0; p < starts.size(); ++p)
+        bytes[p] = std::uint64_t{starts[p]} * readers_[k].item_bytes;
       pass_.pieces(k, bytes);
     }
 }

@@ -23,7 +23,7 @@ struct Walk3 {
   const std::uint32_t* order = nullptr;  // n values
   std::size_t n = 0;
   CheckCompanion* companion = nullptr;
-  std::size_t piece = 0;  // the companion's piece the walk reads
+  std::size_t piece = 0;                        // the companion's piece the walk reads
   std::size_t rows_array = 0, nodes_array = 0;  // the companion's numbers for rows and nodes
   std::size_t next_node = 0, next_point = 0, rows_ready = 0, nodes_ready = 0;
   std::size_t depth = 0, leaves = 0;  // deepest leaf so far, leaves so far
