@@ -86,6 +86,51 @@ PointTree<float> saved_tree(const std::string& path, Shape shape, std::size_t n,
   return tree;
 }
 
+// A 3-D or higher float tree's arrays, copied out to be damaged at will, and their check as a loader
+// runs it on them.
+struct TreeArrays {
+  using Node = kdspace::detail::PointNode<float>;
+  std::size_t dim;
+  kdspace::BuildParams params;
+  std::vector<float> root_lo, root_hi, points;
+  std::vector<std::uint32_t> order;
+  std::vector<Node> nodes;
+
+  explicit TreeArrays(const PointTree<float>& tree) : dim(tree.dim()) {
+    const auto parts = tree.parts();
+    params = parts.params;
+    root_lo = parts.root_lo;
+    root_hi = parts.root_hi;
+    points.assign(parts.points.begin(), parts.points.end());
+    order.assign(parts.order.begin(), parts.order.end());
+    nodes.assign(parts.nodes.begin(), parts.nodes.end());
+  }
+
+  // The check's message, or "" when it passes (`shape` then holds what it found).
+  std::string check(unsigned threads, kdspace::Verify verify, bool wide_kernels = true,
+                    kdspace::detail::TreeShape* shape = nullptr) {
+    kdspace::detail::PointTreeParts<float> p{
+        dim,
+        params,
+        kdspace::detail::Storage<float>::borrow(points.data(), points.size()),
+        kdspace::detail::Storage<std::uint32_t>::borrow(order.data(), order.size()),
+        kdspace::detail::Storage<Node>::borrow(nodes.data(), nodes.size()),
+        root_lo,
+        root_hi,
+        nullptr};
+    p.check_threads = threads;
+    p.wide_kernels = wide_kernels;
+    p.verify = verify;
+    try {
+      const kdspace::detail::TreeShape found = kdspace::detail::check_point_tree(p);
+      if (shape) *shape = found;
+      return std::string();
+    } catch (const kdspace::Error& e) {
+      return std::string(e.what());
+    }
+  }
+};
+
 }  // namespace
 
 TEST_CASE("index: CRC-32C has the standard check value, in hardware (crc32, or folding) and in software",
@@ -598,29 +643,11 @@ TEST_CASE("index: the 3-D float check in one AVX2 loop decides as the baseline w
     kdspace::BuildParams params;
     params.leaf_size = c.leaf_size;
     const PointTree<float> tree(rows.data(), c.n, 3, params);
-    const auto parts = tree.parts();
-    std::vector<float> points(parts.points.begin(), parts.points.end());
-    std::vector<std::uint32_t> order(parts.order.begin(), parts.order.end());
-    std::vector<Node> nodes(parts.nodes.begin(), parts.nodes.end());
-    const auto verdict = [&](bool wide) {
-      kdspace::detail::PointTreeParts<float> p{
-          3,
-          parts.params,
-          kdspace::detail::Storage<float>::borrow(points.data(), points.size()),
-          kdspace::detail::Storage<std::uint32_t>::borrow(order.data(), order.size()),
-          kdspace::detail::Storage<Node>::borrow(nodes.data(), nodes.size()),
-          parts.root_lo,
-          parts.root_hi,
-          nullptr};
-      p.check_threads = c.threads;
-      p.wide_kernels = wide;
-      try {
-        kdspace::detail::check_point_tree(p);
-        return std::string();
-      } catch (const kdspace::Error& e) {
-        return std::string(e.what());
-      }
-    };
+    TreeArrays arrays(tree);
+    auto& points = arrays.points;
+    auto& order = arrays.order;
+    auto& nodes = arrays.nodes;
+    const auto verdict = [&](bool wide) { return arrays.check(c.threads, kdspace::Verify::full, wide); };
     REQUIRE(verdict(true) == "");
     REQUIRE(verdict(false) == "");
     const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
@@ -643,9 +670,7 @@ TEST_CASE("index: the 3-D float check in one AVX2 loop decides as the baseline w
             return v + std::uniform_real_distribution<float>(-0.05f, 0.05f)(rng);
         }
       };
-      const std::vector<float> kept_points = points;
-      const std::vector<std::uint32_t> kept_order = order;
-      const std::vector<Node> kept_nodes = nodes;
+      const TreeArrays kept = arrays;
       const int changes = 1 + trial % 2;
       for (int k = 0; k < changes; ++k) {
         Node& node = nodes[pick(nodes.size())];
@@ -682,9 +707,7 @@ TEST_CASE("index: the 3-D float check in one AVX2 loop decides as the baseline w
       const std::string wide = verdict(true);
       REQUIRE(wide == verdict(false));
       refused += wide.empty() ? 0 : 1;
-      points = kept_points;
-      order = kept_order;
-      nodes = kept_nodes;
+      arrays = kept;
     }
     CHECK(refused > c.trials / 4);
     CHECK(refused < c.trials);  // some changes leave a sound tree
@@ -711,28 +734,13 @@ TEST_CASE("index: the check in pieces decides as the one-thread check, on any nu
     kdspace::BuildParams params;
     params.leaf_size = c.leaf_size;
     const PointTree<float> tree(rows.data(), c.n, c.dim, params);
-    const auto parts = tree.parts();
-    std::vector<float> points(parts.points.begin(), parts.points.end());
-    std::vector<std::uint32_t> order(parts.order.begin(), parts.order.end());
-    std::vector<Node> nodes(parts.nodes.begin(), parts.nodes.end());
+    TreeArrays arrays(tree);
     const auto verdict = [&](unsigned threads, kdspace::Verify verify) {
-      kdspace::detail::PointTreeParts<float> p{
-          c.dim,
-          parts.params,
-          kdspace::detail::Storage<float>::borrow(points.data(), points.size()),
-          kdspace::detail::Storage<std::uint32_t>::borrow(order.data(), order.size()),
-          kdspace::detail::Storage<Node>::borrow(nodes.data(), nodes.size()),
-          parts.root_lo,
-          parts.root_hi,
-          nullptr};
-      p.check_threads = threads;
-      p.verify = verify;
-      try {
-        const kdspace::detail::TreeShape shape = kdspace::detail::check_point_tree(p);
-        return "depth " + std::to_string(shape.depth) + ", leaves " + std::to_string(shape.leaves);
-      } catch (const kdspace::Error& e) {
-        return std::string(e.what());
-      }
+      kdspace::detail::TreeShape shape;
+      const std::string message = arrays.check(threads, verify, true, &shape);
+      return message.empty()
+                 ? "depth " + std::to_string(shape.depth) + ", leaves " + std::to_string(shape.leaves)
+                 : message;
     };
     const std::string sound =
         "depth " + std::to_string(tree.depth()) + ", leaves " + std::to_string(tree.leaf_count());
@@ -747,10 +755,8 @@ TEST_CASE("index: the check in pieces decides as the one-thread check, on any nu
       const auto pick = [&](std::size_t size) {
         return std::uniform_int_distribution<std::size_t>(0, size - 1)(rng);
       };
-      const std::vector<float> kept_points = points;
-      const std::vector<std::uint32_t> kept_order = order;
-      const std::vector<Node> kept_nodes = nodes;
-      Node& node = nodes[pick(nodes.size())];
+      const TreeArrays kept = arrays;
+      Node& node = arrays.nodes[pick(arrays.nodes.size())];
       switch (rng() % 6) {
         case 0:
           node.left_max = node.right_min + 1.0f;
@@ -765,10 +771,11 @@ TEST_CASE("index: the check in pieces decides as the one-thread check, on any nu
           node.info = static_cast<std::uint32_t>(rng() % 4);
           break;
         case 4:
-          points[pick(points.size())] = std::numeric_limits<float>::infinity();
+          arrays.points[pick(arrays.points.size())] = std::numeric_limits<float>::infinity();
           break;
         default:
-          order[pick(order.size())] = rng() % 2 ? order[pick(order.size())] : static_cast<std::uint32_t>(c.n);
+          arrays.order[pick(arrays.order.size())] =
+              rng() % 2 ? arrays.order[pick(arrays.order.size())] : static_cast<std::uint32_t>(c.n);
       }
       CAPTURE(trial);
       for (const kdspace::Verify verify : {kdspace::Verify::full, kdspace::Verify::safety}) {
@@ -779,9 +786,7 @@ TEST_CASE("index: the check in pieces decides as the one-thread check, on any nu
         }
         refused += alone == sound ? 0 : 1;
       }
-      points = kept_points;
-      order = kept_order;
-      nodes = kept_nodes;
+      arrays = kept;
     }
     CHECK(refused > trials / 2);
   }
