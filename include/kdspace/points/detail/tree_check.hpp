@@ -18,7 +18,6 @@
 #pragma once
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -191,10 +190,9 @@ class TreeChecker {
   // their splits checked here), and the subtrees below them (the pieces), both in node order. The
   // threads take the pieces in turn from a shared counter (parallel_for), each walking a piece whole,
   // then marking the order of its rows; a thread that starts late takes what is left, so none waits
-  // on another's share. The pieces and the cut nodes must
-  // then tile the node array and the pieces' points [0, n) in node order. No shape when the tree does
-  // not divide (its root is a leaf). Any problem throws, and run() starts over on one thread, whose
-  // message names it.
+  // on another's share. The pieces and the cut nodes must then tile the node array, and the pieces'
+  // points [0, n), in node order. No shape when the tree does not divide (its root is a leaf). Any
+  // problem throws, and run() starts over on one thread, whose message names it.
   std::optional<TreeShape> run_in_pieces() {
     const std::size_t nodes = p_.nodes.size();
     const std::size_t largest =
