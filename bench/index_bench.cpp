@@ -12,7 +12,8 @@
 //     the minor page faults of a mapped load and the cost of starting a thread. The builds above run
 //     on one thread (BuildParams::threads, 1 by default), each the first of its kind in this process,
 //     the large point tree's and box tree's loads on two; so last, the point tree's build and mapped
-//     load each on one thread and on two, like with like, each in a fresh process (as a program that
+//     load each on one thread, on two and (where the machine has more) on all hardware threads, like
+//     with like, each in a fresh process (as a program that
 //     builds or loads once pays them, page faults of its new memory included), with the same repeated
 //     in this process beside them.
 //  2. Updates. 1e6 uniform 3-D points, then churn: 500,000 random points removed one at a time and
@@ -54,6 +55,7 @@
 #include <stdexcept>
 #include <string>
 #include <system_error>
+#include <thread>
 #include <vector>
 
 #include "kdspace/io/index.hpp"
@@ -330,14 +332,19 @@ void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
       std::filesystem::remove(path, ignored);
     }
   } remove_at_end{path};
-  // [threads - 1]: fresh-process and repeated in-process builds and loads
-  std::vector<Timed> fresh_build[2], fresh_load[2], again_build[2], again_load[2];
+  // One thread, two, and every hardware thread where there are more (the CLI's default for both).
+  std::vector<unsigned> thread_counts = {1, 2};
+  if (const unsigned all = std::thread::hardware_concurrency(); all > 2) thread_counts.push_back(all);
+  // [i]: fresh-process and repeated in-process builds and loads on thread_counts[i] threads
+  const std::size_t rows = thread_counts.size();
+  std::vector<std::vector<Timed>> fresh_build(rows), fresh_load(rows), again_build(rows), again_load(rows);
   for (int r = 0; r < reps; ++r) {
-    for (unsigned threads : {1u, 2u}) {
-      fresh_build[threads - 1].push_back(in_fresh_process(true, threads, n, path));
-      fresh_load[threads - 1].push_back(in_fresh_process(false, threads, n, path));
-      again_build[threads - 1].push_back(timed([&] { return build_tree(base, n, threads); }));
-      again_load[threads - 1].push_back(timed([&] { return load_tree(path, threads); }));
+    for (std::size_t i = 0; i < rows; ++i) {
+      const unsigned threads = thread_counts[i];
+      fresh_build[i].push_back(in_fresh_process(true, threads, n, path));
+      fresh_load[i].push_back(in_fresh_process(false, threads, n, path));
+      again_build[i].push_back(timed([&] { return build_tree(base, n, threads); }));
+      again_load[i].push_back(timed([&] { return load_tree(path, threads); }));
     }
   }
   const auto seconds = [](const std::vector<Timed>& v) {
@@ -362,8 +369,8 @@ void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
       "load, again ms | load ÷ build (same threads) | load ÷ 1-thread build |\n"
       "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
       n, reps);
-  for (unsigned t : {1u, 2u}) {
-    const std::size_t i = t - 1;
+  for (std::size_t i = 0; i < rows; ++i) {
+    const unsigned t = thread_counts[i];
     const double build = seconds(fresh_build[i]), load = seconds(fresh_load[i]);
     std::printf("| %u | %.4f | %.0f | %.4f | %.0f | %.3f | %.0f | %.3f | %.2f%% | %.2f%% |\n", t, build,
                 faults(fresh_build[i]), seconds(again_build[i]), faults(again_build[i]), 1e3 * load,
