@@ -139,6 +139,7 @@ class TreeChecker {
     std::vector<T> lo, hi;       // the root cell cut by the splits above the node being visited, and
                                  // one coordinate more (unused: the 3-D check loads four at once)
     std::size_t next_node = 0;   // the node the next visit must find
+    std::size_t node_limit = 0;  // the nodes it may read lie below this one
     std::size_t next_point = 0;  // the point the next leaf must start at
     TreeShape shape;
     CheckCompanion* companion = nullptr;
@@ -152,6 +153,7 @@ class TreeChecker {
     Walk walk;
     walk.lo.resize(dim_ + 1);  // a padding coordinate: the 3-D check loads four
     walk.hi.resize(dim_ + 1);
+    walk.node_limit = p_.nodes.size();
     walk.companion = companion;
     if (full_) walk.seen.assign(n_ / 64 + 1, 0);
     return walk;
@@ -178,10 +180,11 @@ class TreeChecker {
     return walk.shape;
   }
 
-  // A subtree the parallel check hands out whole: its root, depth and cell, and the first point of
-  // its leftmost leaf; then what its walk found: where its nodes and its points end.
+  // A subtree the parallel check hands out whole: its root, where its nodes must end (its parent's
+  // split says), its depth and cell, and the first point of its leftmost leaf; then what its walk
+  // found: where its nodes and its points end.
   struct Piece {
-    std::size_t root = 0, depth = 0, first_point = 0;
+    std::size_t root = 0, end = 0, depth = 0, first_point = 0;
     std::vector<T> lo, hi;
     std::size_t node_end = 0, point_end = 0;
   };
@@ -209,7 +212,7 @@ class TreeChecker {
       pending.pop_back();
       const PointNode<T>& node = p_.nodes[s.root];
       if (node.is_leaf() || s.end - s.root <= largest || s.depth >= max_tree_depth) {
-        pieces.push_back({s.root, s.depth, 0, std::move(s.lo), std::move(s.hi), 0, 0});
+        pieces.push_back({s.root, s.end, s.depth, 0, std::move(s.lo), std::move(s.hi), 0, 0});
         continue;
       }
       const std::size_t axis = node.axis(), right = node.right_child();
@@ -253,6 +256,8 @@ class TreeChecker {
         Piece& piece = pieces[i];
         walk.piece = i;
         walk.next_node = piece.root;
+        walk.node_limit = piece.end;  // a walk past it fails the tiling below: stop it there, so
+                                      // that no forged file makes the pieces' walks overlap
         walk.next_point = piece.first_point;
         walk.rows_ready = walk.nodes_ready = 0;
         std::copy(piece.lo.begin(), piece.lo.end(), walk.lo.begin());
@@ -421,7 +426,7 @@ class TreeChecker {
   // companion, not too deep; its id.
   std::size_t take_node(Walk& walk, std::size_t depth) const {
     const std::size_t id = walk.next_node++;
-    if (id >= p_.nodes.size()) fail("a right child lies past the last node");
+    if (id >= walk.node_limit) fail("a right child lies past the last node");
     if (id >= walk.nodes_ready && walk.companion)
       walk.nodes_ready = walk.companion->ready(check_nodes, walk.piece, id + 1);
     if (depth > max_tree_depth) fail_depth(id);
@@ -490,7 +495,7 @@ class TreeChecker {
   bool visit3(Walk& walk, std::size_t depth) {
     Walk3 w;
     w.nodes = p_.nodes.data();
-    w.node_count = p_.nodes.size();
+    w.node_count = walk.node_limit;
     w.points = p_.points.data();
     w.order = p_.order.data();
     w.n = n_;

@@ -18,7 +18,7 @@ namespace kdspace::detail {
 /// What a walk of one subtree reads and where it stands: the same figures as TreeChecker's Walk.
 struct Walk3 {
   const PointNode<float>* nodes = nullptr;
-  std::size_t node_count = 0;
+  std::size_t node_count = 0;            // the nodes the walk may read lie below this one
   const float* points = nullptr;         // n rows of 3 floats
   const std::uint32_t* order = nullptr;  // n values
   std::size_t n = 0;
