@@ -39,13 +39,13 @@
 // ranges in range, no cycles, and for point trees every point inside the splits above it) before a
 // query can run, while a second thread checks the sections' checksums in chunks that the first shares
 // once done (structural checks are safe on any bytes); both pass, or no index. A large point tree's
-// or box tree's check runs on two threads of its own, reading the arrays it reads in pieces, each
-// front to back (a point tree's nodes, points and order, a subtree at a time, whichever thread is
-// free taking the next; a box tree's boxes, references and leaf blocks, a half a thread), which it
-// checksums just before it checks them (SectionChecksums: each byte read from memory once); then both
-// share the other sections' chunks. Every problem throws
-// kdspace::Error naming the file and what is wrong; nothing is allocated for what a header claims
-// (every length is checked against the file's size first).
+// check runs on threads of its own (as many as the loader is given), a box tree's on two, reading
+// the arrays it reads in pieces, each front to back (a point tree's nodes, points and order, a
+// subtree at a time, whichever thread is free taking the next; a box tree's boxes, references and
+// leaf blocks, a half a thread), which it checksums just before it checks them (SectionChecksums:
+// each byte read from memory once); then its threads share the other sections' chunks. Every problem
+// throws kdspace::Error naming the file and what is wrong; nothing is allocated for what a header
+// claims (every length is checked against the file's size first).
 //
 // Saving is atomic: the file is written under a temporary name in the same folder, flushed to disk
 // (fsync), renamed over the target, and the folder is flushed. A crash or a full disk mid-save

@@ -180,65 +180,59 @@ class TreeChecker {
     return walk.shape;
   }
 
-  // A subtree the parallel check hands out whole: its root, where its nodes must end (its parent's
-  // split says), its depth and cell, and the first point of its leftmost leaf; then what its walk
-  // found: where its nodes and its points end.
+  // A subtree the parallel check hands out whole: its root, where its nodes end (its parent's split
+  // says), its depth and cell, and the first point of its leftmost leaf.
   struct Piece {
     std::size_t root = 0, end = 0, depth = 0, first_point = 0;
     std::vector<T> lo, hi;
-    std::size_t node_end = 0, point_end = 0;
   };
 
-  // The tree cut into pieces: the inner nodes whose subtrees hold more than `largest` nodes (`cut`,
-  // their splits checked here), and the subtrees below them (the pieces), both in node order. The
-  // threads take the pieces in turn from a shared counter (parallel_for), each walking a piece whole,
-  // then marking the order of its rows; a thread that starts late takes what is left, so none waits
-  // on another's share. The pieces and the cut nodes must then tile the node array, and the pieces'
-  // points [0, n), in node order. No shape when the tree does not divide (its root is a leaf). Any
-  // problem throws, and run() starts over on one thread, whose message names it.
+  // The tree cut into pieces: the inner nodes whose subtrees hold more than `largest` nodes (their
+  // splits checked here), and the subtrees below them (the pieces), in node order, so that the cut
+  // nodes and the pieces' ranges [root, end) tile the node array. The threads take the pieces in turn
+  // from a shared counter (parallel_for), each walking a piece whole, which must end at its `end`
+  // and at the next piece's first point (the last at n, the first starting at 0), then marking the
+  // order of its rows; a thread that starts late takes what is left, so none waits on another's
+  // share. No shape when the tree does not divide (its root is a leaf). Any problem throws, and run()
+  // starts over on one thread, whose message names it.
   std::optional<TreeShape> run_in_pieces() {
     const std::size_t nodes = p_.nodes.size();
     const std::size_t largest =
         std::max<std::size_t>(nodes / (tree_check_pieces_a_thread * resolve_threads(p_.check_threads)), 1);
     std::vector<Piece> pieces;
-    std::vector<std::size_t> cut;
-    struct Pending {
-      std::size_t root, end, depth;  // a subtree whose nodes lie in [root, end)
-      std::vector<T> lo, hi;
-    };
-    std::vector<Pending> pending{{0, nodes, 0, p_.root_lo, p_.root_hi}};
+    std::vector<Piece> pending{{0, nodes, 0, 0, p_.root_lo, p_.root_hi}};
     while (!pending.empty()) {  // depth first, left before right: node order
-      Pending s = std::move(pending.back());
+      Piece s = std::move(pending.back());
       pending.pop_back();
       const PointNode<T>& node = p_.nodes[s.root];
       if (node.is_leaf() || s.end - s.root <= largest || s.depth >= max_tree_depth) {
-        pieces.push_back({s.root, s.end, s.depth, 0, std::move(s.lo), std::move(s.hi), 0, 0});
+        pieces.push_back(std::move(s));
         continue;
       }
+      check_split(s.root, node);
       const std::size_t axis = node.axis(), right = node.right_child();
-      if (axis >= dim_ || !(node.left_max <= node.right_min) || !(s.root + 1 < right && right < s.end))
-        fail_node(s.root, "bad split");
-      cut.push_back(s.root);
-      Pending right_side{right, s.end, s.depth + 1, s.lo, s.hi};
+      if (!(s.root + 1 < right && right < s.end)) fail_node(s.root, "right child outside its subtree");
+      Piece right_side{right, s.end, s.depth + 1, 0, s.lo, s.hi};
       right_side.lo[axis] = std::max(s.lo[axis], node.right_min);
-      Pending left_side{s.root + 1, right, s.depth + 1, std::move(s.lo), std::move(s.hi)};
+      Piece left_side{s.root + 1, right, s.depth + 1, 0, std::move(s.lo), std::move(s.hi)};
       left_side.hi[axis] = std::min(left_side.hi[axis], node.left_max);
       pending.push_back(std::move(right_side));
       pending.push_back(std::move(left_side));
     }
     if (pieces.size() < 2) return std::nullopt;
 
-    // Each piece starts at the first point of its leftmost leaf (the chain checks below confirm it).
+    // Each piece starts at the first point of its leftmost leaf (its walk confirms it).
     std::vector<std::size_t> node_starts(pieces.size()), row_starts(pieces.size());
     for (std::size_t i = 0; i < pieces.size(); ++i) {
       std::size_t leftmost = pieces[i].root;
       for (std::size_t steps = 0; !p_.nodes[leftmost].is_leaf(); ++steps, ++leftmost)
         if (steps > max_tree_depth || leftmost + 1 >= nodes) fail("no leaf");
       pieces[i].first_point = p_.nodes[leftmost].first();
-      if (pieces[i].first_point > n_ || (i > 0 && pieces[i].first_point < pieces[i - 1].first_point))
+      const std::size_t first_point = pieces[i].first_point;
+      if (first_point > n_ || (i == 0 ? first_point != 0 : first_point < pieces[i - 1].first_point))
         fail("pieces out of order");
       node_starts[i] = i == 0 ? 0 : pieces[i].root;
-      row_starts[i] = i == 0 ? 0 : pieces[i].first_point;
+      row_starts[i] = pieces[i].first_point;
     }
     if (p_.companion) {
       p_.companion->pieces(check_rows, row_starts);
@@ -253,33 +247,22 @@ class TreeChecker {
     parallel_for(pieces.size(), workers, 1, [&](std::size_t first, std::size_t end, unsigned worker) {
       Walk& walk = walks[worker];
       for (std::size_t i = first; i < end; ++i) {
-        Piece& piece = pieces[i];
+        const Piece& piece = pieces[i];
+        const std::size_t point_end = i + 1 < pieces.size() ? pieces[i + 1].first_point : n_;
         walk.piece = i;
         walk.next_node = piece.root;
-        walk.node_limit = piece.end;  // a walk past it fails the tiling below: stop it there, so
-                                      // that no forged file makes the pieces' walks overlap
+        walk.node_limit = piece.end;  // so that no forged file makes the pieces' walks overlap
         walk.next_point = piece.first_point;
         walk.rows_ready = walk.nodes_ready = 0;
         std::copy(piece.lo.begin(), piece.lo.end(), walk.lo.begin());
         std::copy(piece.hi.begin(), piece.hi.end(), walk.hi.begin());
         visit(walk, piece.depth);
-        piece.node_end = walk.next_node;
-        piece.point_end = walk.next_point;
-        mark_order(walk, piece.first_point, piece.point_end);
+        if (walk.next_node != piece.end || walk.next_point != point_end) fail("pieces out of order");
+        mark_order(walk, piece.first_point, point_end);
       }
     });
     if (p_.companion) p_.companion->help();
 
-    // In node order, each cut node and each piece starts where the one before ends; the pieces' points
-    // follow each other from 0 to n.
-    std::size_t expected = 0, at_cut = 0, expected_point = 0;
-    for (const Piece& piece : pieces) {
-      for (; at_cut < cut.size() && cut[at_cut] == expected; ++at_cut) ++expected;
-      if (piece.root != expected || piece.first_point != expected_point) fail("pieces out of order");
-      expected = piece.node_end;
-      expected_point = piece.point_end;
-    }
-    if (expected != nodes || at_cut != cut.size() || expected_point != n_) fail("pieces out of order");
     TreeShape shape;
     bool out_of_range = false;
     for (const Walk& walk : walks) {
