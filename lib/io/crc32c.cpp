@@ -82,6 +82,14 @@ __attribute__((target("pclmul,sse4.2"))) std::uint32_t multiply_clmul(std::uint3
 }
 #endif
 
+// multiply(), by pclmul where the processor has it.
+std::uint32_t multiply_fast(std::uint32_t a, std::uint32_t b) {
+#if defined(__x86_64__)
+  if (has_clmul_multiply()) return multiply_clmul(a, b);
+#endif
+  return multiply(a, b);
+}
+
 // x^(8 * 2^k) mod P for k < 64, by squaring.
 std::array<std::uint32_t, 64> make_zero_powers() {
   std::array<std::uint32_t, 64> powers{};
@@ -96,15 +104,8 @@ std::array<std::uint32_t, 64> make_zero_powers() {
 std::uint32_t zeros_operator(std::size_t bytes) {
   static const std::array<std::uint32_t, 64> powers = make_zero_powers();
   std::uint32_t result = 0x80000000u;  // x^0
-#if defined(__x86_64__)
-  if (has_clmul_multiply()) {
-    for (std::size_t k = 0; bytes > 0; bytes >>= 1, ++k)
-      if (bytes & 1u) result = multiply_clmul(result, powers[k]);
-    return result;
-  }
-#endif
   for (std::size_t k = 0; bytes > 0; bytes >>= 1, ++k)
-    if (bytes & 1u) result = multiply(result, powers[k]);
+    if (bytes & 1u) result = multiply_fast(result, powers[k]);
   return result;
 }
 
@@ -255,10 +256,7 @@ std::uint32_t crc32c_extend(std::uint32_t crc, const void* data, std::size_t siz
 }
 
 std::uint32_t crc32c_combine(std::uint32_t crc_a, std::uint32_t crc_b, std::size_t length_b) {
-#if defined(__x86_64__)
-  if (has_clmul_multiply()) return multiply_clmul(crc_a, zeros_operator(length_b)) ^ crc_b;
-#endif
-  return multiply(crc_a, zeros_operator(length_b)) ^ crc_b;
+  return multiply_fast(crc_a, zeros_operator(length_b)) ^ crc_b;
 }
 
 std::uint32_t crc32c_combine_portable(std::uint32_t crc_a, std::uint32_t crc_b, std::size_t length_b) {
