@@ -153,13 +153,15 @@ double thread_start_s(int reps) {
 
 // Seconds to map `path` and sum every 8-byte word of it: a mapped load's floor (it reads each byte). On
 // two threads each sums half the words (the floor of a two-thread load, thread start included).
-double read_mapped(const std::string& path, unsigned threads) {
+// advise_huge: madvise(MADV_HUGEPAGE) on the mapping first, as kdspace's loads do.
+double read_mapped(const std::string& path, unsigned threads, bool advise_huge = true) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   const auto size = static_cast<std::size_t>(std::filesystem::file_size(path));
   const Clock::time_point start = Clock::now();
   void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
   std::uint64_t sums[2] = {0, 0};
   if (map != MAP_FAILED) {
+    if (advise_huge) (void)::madvise(map, size, MADV_HUGEPAGE);
     const auto* words = static_cast<const std::uint64_t*>(map);
     const std::size_t count = size / 8, half = threads > 1 ? count / 2 : count;
     const auto sum = [words](std::size_t begin, std::size_t end, std::uint64_t& out) {
@@ -288,12 +290,25 @@ Tree3 load_tree(const std::string& path, unsigned threads) {
                                              threads);
 }
 
-// In the child: one build of the parent's points, or one mapped load of `path`, on `threads`; prints
-// its Timed.
-int child_run(bool build, unsigned threads, std::size_t n, const std::string& path) {
-  const auto base = build ? uniform_points(n, 3, 1) : std::vector<float>();
-  const Timed t = build ? timed([&] { return build_tree(base, n, threads); })
-                        : timed([&] { return load_tree(path, threads); });
+// What a child process times once.
+enum class ChildWork { build, load, read_plain, read_advised };
+const char* const child_work_names[] = {"build", "load", "read-plain", "read-advised"};
+
+// In the child: one build of the parent's points, one mapped load of `path` on `threads`, or one read
+// of every byte of a mapping of `path` (read_mapped, on one thread) without or with the huge-page
+// advice; prints its Timed.
+int child_run(ChildWork work, unsigned threads, std::size_t n, const std::string& path) {
+  Timed t;
+  if (work == ChildWork::build) {
+    const auto base = uniform_points(n, 3, 1);
+    t = timed([&] { return build_tree(base, n, threads); });
+  } else if (work == ChildWork::load) {
+    t = timed([&] { return load_tree(path, threads); });
+  } else {
+    const long faults_before = minor_faults();
+    t.seconds = read_mapped(path, 1, work == ChildWork::read_advised);
+    t.faults = static_cast<double>(minor_faults() - faults_before);
+  }
   std::printf("%.9g %.0f\n", t.seconds, t.faults);
   return 0;
 }
@@ -307,17 +322,84 @@ std::string self_path() {
 }
 
 // Runs this program with --child and returns what it measured.
-Timed in_fresh_process(bool build, unsigned threads, std::size_t n, const std::string& path) {
+Timed in_fresh_process(ChildWork work, unsigned threads, std::size_t n, const std::string& path) {
   const std::string self = self_path();
   for (const std::string& name : {self, path})
     if (name.find('\'') != std::string::npos) throw std::runtime_error("a quote in " + name);
-  const std::string command = "'" + self + "' --child " + (build ? "build " : "load ") +
+  const std::string command = "'" + self + "' --child " + child_work_names[static_cast<int>(work)] + " " +
                               std::to_string(threads) + " " + std::to_string(n) + " '" + path + "'";
   FILE* pipe = ::popen(command.c_str(), "r");
   Timed t;
   const bool ok = pipe && std::fscanf(pipe, "%lf %lf", &t.seconds, &t.faults) == 2;
   if (!pipe || ::pclose(pipe) != 0 || !ok) throw std::runtime_error("the child run failed: " + command);
   return t;
+}
+
+double seconds(const std::vector<Timed>& v) {
+  std::vector<double> s;
+  for (const Timed& t : v) s.push_back(t.seconds);
+  return median(s);
+}
+double faults(const std::vector<Timed>& v) {
+  std::vector<double> f;
+  for (const Timed& t : v) f.push_back(t.faults);
+  return median(f);
+}
+
+// Drops `path` (written and synced, mapped nowhere) from the page cache; returns the fraction of its
+// pages still there afterwards (mincore), 1 where it could not be opened or mapped.
+double evict_from_page_cache(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return 1;
+  const auto size = static_cast<std::size_t>(std::filesystem::file_size(path));
+  (void)::fdatasync(fd);
+  (void)::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
+  double resident = 1;
+  void* map = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
+  if (map != MAP_FAILED) {
+    const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE)),
+                      pages = (size + page - 1) / page;
+    std::vector<unsigned char> in(pages);
+    if (::mincore(map, size, in.data()) == 0)
+      resident = dbl(std::count_if(in.begin(), in.end(), [](unsigned char c) { return c & 1; })) / dbl(pages);
+    ::munmap(map, size);
+  }
+  ::close(fd);
+  return resident;
+}
+
+// A saved index is read back from storage once the system has dropped it from memory, and the page
+// cache then holds it as that first read left it: in 4 KiB pages, or (for a mapping advised
+// MADV_HUGEPAGE, as kdspace's loads are) in 2 MiB folios that later mappings take with one page-table
+// entry each. Each repetition drops the file, then maps it in a fresh process twice, for kdspace's
+// load on one thread and for a plain read of every byte without and with the advice.
+void after_eviction(const std::string& path, int reps) {
+  const ChildWork works[] = {ChildWork::load, ChildWork::read_plain, ChildWork::read_advised};
+  const char* const labels[] = {"kdspace load_point_tree (mapped, 1 thread)", "read every byte, plain mmap",
+                                "read every byte, mmap advised MADV_HUGEPAGE"};
+  std::vector<Timed> first[3], second[3];
+  std::vector<double> resident;
+  for (int r = 0; r < reps; ++r)
+    for (int w = 0; w < 3; ++w) {
+      resident.push_back(evict_from_page_cache(path));
+      first[w].push_back(in_fresh_process(works[w], 1, 0, path));
+      second[w].push_back(in_fresh_process(works[w], 1, 0, path));
+    }
+  std::printf(
+      "\n### The same file after the page cache dropped it (median of %d each, interleaved)\n\n"
+      "Each repetition drops the file from the page cache (posix_fadvise DONTNEED; at most %.1f%% of its\n"
+      "pages stayed), then maps it in a fresh process twice: the first mapping reads it from storage,\n"
+      "the second finds it in the page cache as the first left it.\n\n"
+      "| mapping | first, from storage ms | faults | second ms | faults |\n|---|---:|---:|---:|---:|\n",
+      reps, 100 * *std::max_element(resident.begin(), resident.end()));
+  for (int w = 0; w < 3; ++w) {
+    std::printf("| %s | %.3f | %.0f | %.3f | %.0f |\n", labels[w], 1e3 * seconds(first[w]), faults(first[w]),
+                1e3 * seconds(second[w]), faults(second[w]));
+    json(std::string("\"part\": \"after_eviction\", \"work\": \"") +
+         child_work_names[static_cast<int>(works[w])] + "\", \"first_s\": " + num(seconds(first[w])) +
+         ", \"first_faults\": " + num(faults(first[w])) + ", \"second_s\": " + num(seconds(second[w])) +
+         ", \"second_faults\": " + num(faults(second[w])));
+  }
 }
 
 void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
@@ -341,22 +423,12 @@ void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
   for (int r = 0; r < reps; ++r) {
     for (std::size_t i = 0; i < rows; ++i) {
       const unsigned threads = thread_counts[i];
-      fresh_build[i].push_back(in_fresh_process(true, threads, n, path));
-      fresh_load[i].push_back(in_fresh_process(false, threads, n, path));
+      fresh_build[i].push_back(in_fresh_process(ChildWork::build, threads, n, path));
+      fresh_load[i].push_back(in_fresh_process(ChildWork::load, threads, n, path));
       again_build[i].push_back(timed([&] { return build_tree(base, n, threads); }));
       again_load[i].push_back(timed([&] { return load_tree(path, threads); }));
     }
   }
-  const auto seconds = [](const std::vector<Timed>& v) {
-    std::vector<double> s;
-    for (const Timed& t : v) s.push_back(t.seconds);
-    return median(s);
-  };
-  const auto faults = [](const std::vector<Timed>& v) {
-    std::vector<double> f;
-    for (const Timed& t : v) f.push_back(t.faults);
-    return median(f);
-  };
   std::printf(
       "\n### PointTree, %zu uniform 3-D float points: build and mapped load as a process pays them "
       "(median of %d each, interleaved)\n\n"
@@ -383,6 +455,7 @@ void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
          ", \"load_map_fresh_faults\": " + num(faults(fresh_load[i])) +
          ", \"load_map_again_s\": " + num(seconds(again_load[i])));
   }
+  after_eviction(path, reps);
 }
 
 void part_load(std::size_t scale, int reps, const std::string& dir) {
@@ -760,7 +833,11 @@ void part_updates(std::size_t scale, int reps) {
 int main(int argc, char** argv) {
   if (argc == 6 && std::string(argv[1]) == "--child") {
     try {
-      return child_run(std::string(argv[2]) == "build", static_cast<unsigned>(std::atoi(argv[3])),
+      const auto named = std::find_if(std::begin(child_work_names), std::end(child_work_names),
+                                      [&](const char* name) { return std::string(argv[2]) == name; });
+      if (named == std::end(child_work_names)) throw std::runtime_error(std::string("no work ") + argv[2]);
+      return child_run(static_cast<ChildWork>(named - std::begin(child_work_names)),
+                       static_cast<unsigned>(std::atoi(argv[3])),
                        static_cast<std::size_t>(std::atoll(argv[4])), argv[5]);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "kdspace-index-bench --child: %s\n", e.what());

@@ -4,17 +4,16 @@
 // of their mapping in /proc/self/smaps); otherwise they come from operator new. Either way the
 // values, and the answers of the trees and joins that hold them, are the same.
 #include <catch2/catch.hpp>
-
 #include <cstdint>
 #include <cstdlib>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "kdspace/detail/huge_pages.hpp"
 #include "kdspace/detail/storage.hpp"
 #include "kdspace/joins/joins.hpp"
+#include "mapping_flags.hpp"
 #include "support.hpp"
 
 namespace {
@@ -23,32 +22,9 @@ using kdspace::detail::huge_page_bytes;
 using kdspace::detail::huge_page_threshold;
 using kdspace::detail::huge_pages_enabled;
 using kdspace::detail::HugePageVector;
+using kdspace_test::advised_for_huge_pages;
 
 bool aligned_to_huge_page(const void* p) { return reinterpret_cast<std::uintptr_t>(p) % huge_page_bytes == 0; }
-
-/// The VmFlags of the mapping that holds `address` in /proc/self/smaps ("" where none is found).
-std::string mapping_flags(const void* address) {
-  const auto at = reinterpret_cast<std::uintptr_t>(address);
-  std::ifstream smaps("/proc/self/smaps");
-  std::string line;
-  bool inside = false;
-  while (std::getline(smaps, line)) {
-    std::istringstream fields(line);
-    std::string range;
-    fields >> range;
-    const auto dash = range.find('-');
-    if (dash != std::string::npos && range.find(':') == std::string::npos && line.find(':') > dash) {
-      const auto lo = std::stoull(range.substr(0, dash), nullptr, 16);
-      const auto hi = std::stoull(range.substr(dash + 1), nullptr, 16);
-      inside = lo <= at && at < hi;
-    } else if (inside && line.rfind("VmFlags:", 0) == 0) {
-      return line.substr(8) + " ";
-    }
-  }
-  return "";
-}
-
-bool advised_for_huge_pages(const void* address) { return mapping_flags(address).find(" hg ") != std::string::npos; }
 
 }  // namespace
 

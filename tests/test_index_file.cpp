@@ -23,6 +23,7 @@
 #include "catch_support.hpp"
 #include "kdspace/error.hpp"
 #include "kdspace/io/index.hpp"
+#include "mapping_flags.hpp"
 #include "support.hpp"
 
 namespace fs = std::filesystem;
@@ -855,6 +856,28 @@ TEST_CASE("index: a process killed mid-save leaves the old file intact", "[index
   // Saving again works, and replaces the file whole.
   io::save(path, bigger);
   REQUIRE(io::load_point_tree<float>(path).size() == 20000);
+}
+
+// Where the file is not in the page cache, Linux reads a mapping advised MADV_HUGEPAGE back in 2 MiB
+// folios, which later loads map with one entry each (kdspace-index-bench times loads after eviction).
+TEST_CASE("index: a mapped load advises huge pages for a file of 2 MiB or more, and answers the same",
+          "[index]") {
+  TempDir tmp;
+  const std::string path = tmp.file("tree.kdx");
+  const std::size_t n = 200000;  // 2.4 MB of points, 0.8 MB of order
+  const PointTree<float> built = saved_tree(path, Shape::uniform, n, 31);
+  REQUIRE(fs::file_size(path) >= (std::size_t{2} << 20));
+  const auto mapped = io::load_point_tree<float>(path);
+  const auto read = io::load_point_tree<float>(path, io::LoadMode::read);
+#if defined(__linux__)
+  if (fs::exists("/sys/kernel/mm/transparent_hugepage/enabled")) {
+    CHECK(kdspace_test::advised_for_huge_pages(mapped.parts().points.data()));
+    CHECK_FALSE(kdspace_test::advised_for_huge_pages(read.parts().points.data()));
+  }
+#endif
+  const auto queries = kdspace_test::make_points<float>(Shape::uniform, 200, 3, 32);
+  require_same_answers(mapped, built, queries);
+  require_same_answers(read, built, queries);
 }
 
 TEST_CASE("index: a mapped tree stays valid when the file is saved over", "[index]") {

@@ -59,6 +59,19 @@ std::string errno_text() {
   throw Error(path + ": " + what);
 }
 
+// Asks the kernel to back a mapping of an index file with huge pages, before anything in it is read.
+// Where the file is not in the page cache (evicted since it was written), Linux then reads it back in
+// 2 MiB folios instead of 4 KiB pages, and every later mapping of it takes one page-table entry per
+// 2 MiB instead of one fault per 16 pages: kdspace-index-bench measures a 1e6-point tree's load after
+// eviction. Advice only: where the kernel declines (no transparent huge pages, another file
+// system), nothing changes, so a failure is not an error.
+void advise_huge_pages([[maybe_unused]] void* map, [[maybe_unused]] std::size_t size) {
+#if defined(MADV_HUGEPAGE)
+  constexpr std::size_t huge_page = std::size_t{2} << 20;
+  if (size >= huge_page) (void)::madvise(map, size, MADV_HUGEPAGE);
+#endif
+}
+
 bool known_kind(std::uint32_t v) {
   return v >= 1 && v <= 4;
 }
@@ -219,19 +232,23 @@ std::shared_ptr<const IndexFile> IndexFile::open(const std::string& path, LoadMo
   if (size > static_cast<std::uint64_t>(SIZE_MAX)) fail_path(path, "file too large");
   file->size_ = static_cast<std::size_t>(size);
 
-  // The magic first, so that a large file of another kind is neither mapped nor read.
-  unsigned char head[sizeof magic] = {};
+  // The magic first, so that a large file of another kind is not read: through the mapping, advised
+  // before anything in it is read (a pread() would bring the file's first pages into the page cache
+  // in small pages, past the advice).
   const std::size_t head_bytes = std::min<std::size_t>(sizeof magic, file->size_);
-  if (!read_at(fd.fd, head, head_bytes, 0)) fail_path(path, "read error: " + errno_text());
-  if (std::memcmp(head, magic, head_bytes) != 0)
-    fail_path(path, "not a kdspace index file (bad magic bytes)");
-
   if (mode == LoadMode::map) {
     void* p = ::mmap(nullptr, file->size_, PROT_READ, MAP_PRIVATE, fd.fd, 0);
     if (p == MAP_FAILED) fail_path(path, "cannot memory-map: " + errno_text());
     file->bytes_ = static_cast<const unsigned char*>(p);
     file->mapped_ = true;
+    advise_huge_pages(p, file->size_);
+    if (std::memcmp(file->bytes_, magic, head_bytes) != 0)
+      fail_path(path, "not a kdspace index file (bad magic bytes)");
   } else {
+    unsigned char head[sizeof magic] = {};
+    if (!read_at(fd.fd, head, head_bytes, 0)) fail_path(path, "read error: " + errno_text());
+    if (std::memcmp(head, magic, head_bytes) != 0)
+      fail_path(path, "not a kdspace index file (bad magic bytes)");
     file->buffer_ = allocate_aligned(file->size_);
     file->bytes_ = static_cast<const unsigned char*>(file->buffer_);
     if (!read_at(fd.fd, file->buffer_, file->size_, 0))
