@@ -201,6 +201,12 @@ __attribute__((target("avx512f"))) __m512i wide(FoldConstants k) {
 // Bytes at which folding pays (below, the three-stream loop is as fast).
 constexpr std::size_t fold_min_bytes = 1024;
 
+// How far ahead of the folds the loop asks for the bytes. A file checked at load comes from memory,
+// not the caches, and the processor's own prefetchers stop at each 4 KiB page, so the folds waited on
+// memory: a 1e6-point tree's mapped load on one thread, in fresh processes, took 1.05-1.12 ms without
+// this and 0.89-0.90 ms with 8 KiB (4 KiB: 0.96-0.98, 16 KiB: 0.91).
+constexpr std::size_t fold_prefetch_bytes = 8192;
+
 __attribute__((target("avx512f,vpclmulqdq,pclmul,sse4.2"))) std::uint32_t update_folding(
     std::uint32_t c, const unsigned char* p, std::size_t n) {
   static const FoldConstants by256 = fold_by(256), by192 = fold_by(192), by128 = fold_by(128),
@@ -213,6 +219,10 @@ __attribute__((target("avx512f,vpclmulqdq,pclmul,sse4.2"))) std::uint32_t update
   n -= 256;
   const __m512i k256 = wide(by256);
   for (; n >= 256; n -= 256, p += 256) {
+    // An address, never read: past the end of the bytes the hint is dropped quietly.
+    const std::uintptr_t ahead = reinterpret_cast<std::uintptr_t>(p) + fold_prefetch_bytes;
+    for (std::uintptr_t line = 0; line < 256; line += 64)
+      _mm_prefetch(reinterpret_cast<const char*>(ahead + line), _MM_HINT_T0);
     x0 = fold(x0, k256, _mm512_loadu_si512(p));
     x1 = fold(x1, k256, _mm512_loadu_si512(p + 64));
     x2 = fold(x2, k256, _mm512_loadu_si512(p + 128));
