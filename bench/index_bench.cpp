@@ -15,7 +15,9 @@
 //     load each on one thread, on two and (where the machine has more) on all hardware threads, like
 //     with like, each in a fresh process (as a program that
 //     builds or loads once pays them, page faults of its new memory included), with the same repeated
-//     in this process beside them.
+//     in this process beside them; and the same file's mapped load after the page cache dropped it
+//     (posix_fadvise DONTNEED), from storage and then again, beside a plain read of every byte of a
+//     mapping without and with the huge-page advice the loads give.
 //  2. Updates. 1e6 uniform 3-D points, then churn: 500,000 random points removed one at a time and
 //     500,000 new ones inserted, half one at a time and half in batches of 1,000, interleaved across
 //     libraries in rounds of 50,000 operations: kdspace's DynamicPointTree, nanoflann's
@@ -32,7 +34,8 @@
 //   --quick   sizes / 10 (for development)
 //   --reps R  repetitions of the timed loads and queries, interleaved, median reported (default 5)
 //   --dir D   where the index files go (default: the temporary folder)
-//   --only process   only the point tree's build and load as a process pays them (the last table of 1.)
+//   --only process   only the point tree's build and load as a process pays them, and its load after
+//                    the page cache dropped the file (the last two tables of 1.)
 // Output: markdown tables, then one JSON line per measurement ({"bench":"index",...}).
 #include <fcntl.h>
 #include <hnswlib/hnswlib.h>
