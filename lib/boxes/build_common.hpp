@@ -15,6 +15,7 @@
 #include "kdspace/box.hpp"
 #include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/error.hpp"
+#include "kdspace/points/detail/parallel.hpp"
 
 namespace kdspace::detail {
 
@@ -197,27 +198,16 @@ void build_subtree(const Method& method, typename Method::Work work, const Box3f
   constexpr std::size_t min_parallel_boxes = 4096;
   if (spare_threads > 0 && method.size(children.first) + method.size(children.second) >= min_parallel_boxes) {
     const unsigned spare = spare_threads - 1;
-    TreeWriter left_out;
-    std::exception_ptr left_error;
-    std::thread left_thread([&] {
-      try {
-        build_subtree(method, std::move(children.first), lcell, depth + 1, max_depth, left_budget, left_out,
-                      spare / 2);
-      } catch (...) {
-        left_error = std::current_exception();
-      }
-    });
-    TreeWriter right_out;
-    std::exception_ptr right_error;
-    try {
-      build_subtree(method, std::move(children.second), rcell, depth + 1, max_depth, right_budget, right_out,
-                    spare - spare / 2);
-    } catch (...) {
-      right_error = std::current_exception();
-    }
-    left_thread.join();
-    if (left_error) std::rethrow_exception(left_error);
-    if (right_error) std::rethrow_exception(right_error);
+    TreeWriter left_out, right_out;
+    fork_join(
+        [&] {
+          build_subtree(method, std::move(children.first), lcell, depth + 1, max_depth, left_budget, left_out,
+                        spare / 2);
+        },
+        [&] {
+          build_subtree(method, std::move(children.second), rcell, depth + 1, max_depth, right_budget,
+                        right_out, spare - spare / 2);
+        });
     out.append(left_out);
     out.link_right_child(self);
     out.append(right_out);

@@ -16,12 +16,12 @@
 #include <array>
 #include <exception>
 #include <optional>
-#include <thread>
 #include <utility>
 #include <vector>
 
 #include "binned_sah.hpp"
 #include "build_common.hpp"
+#include "kdspace/detail/section_thread.hpp"
 #include "sah_cost.hpp"
 
 namespace kdspace::detail {
@@ -101,7 +101,7 @@ class SahNlognMethod {
       return;
     }
     std::exception_ptr errors[3];
-    std::vector<std::thread> helpers;
+    std::vector<SectionThread> helpers;
     for (int axis = 1; axis < 3 && static_cast<unsigned>(axis) < threads; ++axis)
       helpers.emplace_back([&, axis] {
         try {
@@ -112,7 +112,7 @@ class SahNlognMethod {
       });
     sort_axis(0);
     if (threads < 3) sort_axis(2);
-    for (std::thread& t : helpers) t.join();
+    for (SectionThread& t : helpers) t.join();
     for (const std::exception_ptr& e : errors)
       if (e) std::rethrow_exception(e);
   }

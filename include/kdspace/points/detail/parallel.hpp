@@ -1,13 +1,17 @@
-// parallel_for: the one loop that spreads independent work items over threads.
+// parallel_for: the one loop that spreads independent work items over threads; fork_join: two pieces of
+// work side by side. Their threads are SectionThreads, started on another processor than the caller's.
 #pragma once
 
 #include <algorithm>
 #include <atomic>
 #include <cstddef>
 #include <exception>
+#include <optional>
 #include <system_error>
 #include <thread>
 #include <vector>
+
+#include "kdspace/detail/section_thread.hpp"
 
 namespace kdspace::detail {
 
@@ -41,10 +45,10 @@ void parallel_for(std::size_t n, unsigned threads, std::size_t chunk, Body&& bod
       next.store(n);  // the others stop at their next chunk
     }
   };
-  std::vector<std::thread> pool;
+  std::vector<SectionThread> pool;
   pool.reserve(workers - 1);
   try {
-    for (unsigned w = 1; w < workers; ++w) pool.emplace_back(run, w);
+    for (unsigned w = 1; w < workers; ++w) pool.emplace_back([&run, w] { run(w); });
   } catch (const std::system_error&) {
     // No more threads to be had: the ones started and this one share the work.
   }
@@ -59,9 +63,9 @@ void parallel_for(std::size_t n, unsigned threads, std::size_t chunk, Body&& bod
 template <class Left, class Right>
 void fork_join(Left&& left, Right&& right) {
   std::exception_ptr left_error;
-  std::thread worker;
+  std::optional<SectionThread> worker;
   try {
-    worker = std::thread([&] {
+    worker.emplace([&] {
       try {
         left();
       } catch (...) {
@@ -76,10 +80,10 @@ void fork_join(Left&& left, Right&& right) {
   try {
     right();
   } catch (...) {
-    worker.join();
+    worker->join();
     throw;
   }
-  worker.join();
+  worker->join();
   if (left_error) std::rethrow_exception(left_error);
 }
 

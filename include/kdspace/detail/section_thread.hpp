@@ -1,0 +1,127 @@
+// SectionThread: a thread that works beside its parent in a parallel section, started on another
+// processor than the parent's.
+//
+// Linux may start a new thread on its parent's processor, where it waits for the parent (or the
+// parent for it) until the load balancer moves one of them. On the 2-core test machine that happened
+// in 3 to 7 of 8 fresh processes, and the move came later than a section of a millisecond or two ends:
+// a 1e6-point index's two-thread load check then ran one piece after another on one processor. So
+// where the system lets a thread be placed (Linux with glibc), the thread is created allowed on every
+// processor its parent may use but the one the parent runs on, and its first act is to take back the
+// parent's whole set: it starts elsewhere, and the scheduler may move it anywhere afterwards. Where
+// the parent may use one processor only, or the affinity cannot be read, it starts as any thread.
+#pragma once
+
+#include <exception>
+#include <memory>
+#include <system_error>
+#include <thread>
+#include <type_traits>
+#include <utility>
+
+#if defined(__linux__) && defined(__GLIBC__)
+#include <pthread.h>
+#include <sched.h>
+#define KDSPACE_PLACED_THREADS 1
+#endif
+
+namespace kdspace::detail {
+
+class SectionThread {
+ public:
+  /// Starts body() on a new thread. Throws std::system_error where no thread can be had.
+  template <class Body>
+  explicit SectionThread(Body&& body) {
+    auto task = std::make_unique<Task<std::decay_t<Body>>>(std::forward<Body>(body));
+#if defined(KDSPACE_PLACED_THREADS)
+    pthread_attr_t attr;
+    if (const int error = pthread_attr_init(&attr)) throw std::system_error(error, std::generic_category());
+    place_elsewhere(attr, *task);
+    const int error = pthread_create(&handle_, &attr, &run_task, task.get());
+    pthread_attr_destroy(&attr);
+    if (error) throw std::system_error(error, std::generic_category(), "cannot start a thread");
+    task.release();  // the thread owns it now
+    joinable_ = true;
+#else
+    thread_ = std::thread([task = std::move(task)] { task->call(); });
+#endif
+  }
+  SectionThread(const SectionThread&) = delete;
+  SectionThread& operator=(const SectionThread&) = delete;
+  SectionThread(SectionThread&& other) noexcept {
+    *this = std::move(other);
+  }
+  SectionThread& operator=(SectionThread&& other) noexcept {
+    if (this != &other) {
+      join();
+#if defined(KDSPACE_PLACED_THREADS)
+      handle_ = other.handle_;
+      joinable_ = std::exchange(other.joinable_, false);
+#else
+      thread_ = std::move(other.thread_);
+#endif
+    }
+    return *this;
+  }
+  /// Waits for the thread (the destructor does too).
+  ~SectionThread() {
+    join();
+  }
+
+  /// Waits for body() to return; nothing once it has been waited for.
+  void join() {
+#if defined(KDSPACE_PLACED_THREADS)
+    if (joinable_) pthread_join(handle_, nullptr);
+    joinable_ = false;
+#else
+    if (thread_.joinable()) thread_.join();
+#endif
+  }
+
+ private:
+  struct TaskBase {
+    virtual ~TaskBase() = default;
+    virtual void call() = 0;
+#if defined(KDSPACE_PLACED_THREADS)
+    cpu_set_t parents_set;  // the processors the parent may use, taken back first thing
+    bool take_back = false;
+#endif
+  };
+  template <class Body>
+  struct Task : TaskBase {
+    explicit Task(Body&& b) : body(std::move(b)) {}
+    explicit Task(const Body& b) : body(b) {}
+    void call() override { body(); }
+    Body body;
+  };
+
+#if defined(KDSPACE_PLACED_THREADS)
+  // Allows the thread every processor of the parent's set but the parent's own, where that leaves one.
+  static void place_elsewhere(pthread_attr_t& attr, TaskBase& task) {
+    if (sched_getaffinity(0, sizeof task.parents_set, &task.parents_set) != 0) return;
+    const int here = sched_getcpu();
+    if (here < 0 || here >= CPU_SETSIZE || !CPU_ISSET(here, &task.parents_set)) return;
+    cpu_set_t others = task.parents_set;
+    CPU_CLR(here, &others);
+    if (CPU_COUNT(&others) == 0) return;
+    task.take_back = pthread_attr_setaffinity_np(&attr, sizeof others, &others) == 0;
+  }
+  static void* run_task(void* p) {
+    const std::unique_ptr<TaskBase> task(static_cast<TaskBase*>(p));
+    if (task->take_back)
+      (void)pthread_setaffinity_np(pthread_self(), sizeof task->parents_set, &task->parents_set);
+    try {
+      task->call();
+    } catch (...) {
+      std::terminate();  // as for an exception out of a std::thread's function
+    }
+    return nullptr;
+  }
+
+  pthread_t handle_{};
+  bool joinable_ = false;
+#else
+  std::thread thread_;
+#endif
+};
+
+}  // namespace kdspace::detail
