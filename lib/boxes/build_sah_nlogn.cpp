@@ -14,14 +14,13 @@
 // the same counts and the same cost function, so both make the same tree.
 #include <algorithm>
 #include <array>
-#include <exception>
 #include <optional>
 #include <utility>
 #include <vector>
 
 #include "binned_sah.hpp"
 #include "build_common.hpp"
-#include "kdspace/detail/section_thread.hpp"
+#include "kdspace/points/detail/parallel.hpp"
 #include "sah_cost.hpp"
 
 namespace kdspace::detail {
@@ -96,25 +95,10 @@ class SahNlognMethod {
       std::sort(events.begin(), events.end());
     };
     w.exact = true;
-    if (threads < 2 || w.refs.size() < 4096) {
-      for (int axis = 0; axis < 3; ++axis) sort_axis(axis);
-      return;
-    }
-    std::exception_ptr errors[3];
-    std::vector<SectionThread> helpers;
-    for (int axis = 1; axis < 3 && static_cast<unsigned>(axis) < threads; ++axis)
-      helpers.emplace_back([&, axis] {
-        try {
-          sort_axis(axis);
-        } catch (...) {
-          errors[axis] = std::current_exception();
-        }
-      });
-    sort_axis(0);
-    if (threads < 3) sort_axis(2);
-    for (SectionThread& t : helpers) t.join();
-    for (const std::exception_ptr& e : errors)
-      if (e) std::rethrow_exception(e);
+    parallel_for(3, threads < 2 || w.refs.size() < 4096 ? 1 : threads, 1,
+                 [&](std::size_t begin, std::size_t end, unsigned) {
+                   for (std::size_t axis = begin; axis < end; ++axis) sort_axis(static_cast<int>(axis));
+                 });
   }
 
   /// The exact partition: each child's events from the parent's, still sorted (see the top).
