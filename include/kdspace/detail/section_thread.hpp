@@ -28,8 +28,9 @@ namespace kdspace::detail {
 
 class SectionThread {
  public:
-  /// Starts body() on a new thread. Throws std::system_error where no thread can be had.
-  template <class Body>
+  /// Starts body() on a new thread. Throws std::system_error where no thread can be had. (Not for a
+  /// SectionThread itself: copying one is deleted, moving one is the move constructor.)
+  template <class Body, std::enable_if_t<!std::is_same_v<std::decay_t<Body>, SectionThread>, int> = 0>
   explicit SectionThread(Body&& body) {
     auto task = std::make_unique<Task<std::decay_t<Body>>>(std::forward<Body>(body));
 #if defined(KDSPACE_PLACED_THREADS)
