@@ -860,6 +860,63 @@ TEST_CASE("rays: nearly parallel rays and rays with subnormal direction componen
   check_scene(boxes, rays);
 }
 
+TEST_CASE("rays: a hit's t rounded up to float is the smallest float at or above it", "[rays]") {
+  // round_up<float> finds it without a branch on the rounding: checked against the float nearest t
+  // stepped up by std::nextafter where it lies below t, on t of every exponent and sign, exact
+  // floats, halfway and near-halfway doubles, zeros, subnormals and the ends of the float range.
+  using kdspace::detail::round_up;
+  const float inf = std::numeric_limits<float>::infinity(), largest = std::numeric_limits<float>::max();
+  const auto expected = [&](double t) {
+    if (t > static_cast<double>(largest)) return inf;
+    if (t < -static_cast<double>(largest)) return -largest;
+    const auto f = static_cast<float>(t);
+    return static_cast<double>(f) < t ? std::nextafter(f, inf) : f;
+  };
+  std::size_t checked = 0;
+  const auto check = [&](double t) {
+    ++checked;
+    INFO("t " << t);
+    const float up = round_up<float>(t), want = expected(t);
+    REQUIRE(std::memcmp(&up, &want, sizeof up) == 0);  // -0 stays -0
+    REQUIRE(static_cast<double>(up) >= t);
+  };
+  Rng rng(37);
+  std::uniform_int_distribution<int> exponent(-160, 130);
+  std::uniform_real_distribution<double> mantissa(1.0, 2.0);
+  for (int i = 0; i < 200000; ++i) {
+    const double t = std::ldexp(mantissa(rng), exponent(rng)) * (i % 2 ? -1.0 : 1.0);
+    check(t);
+    const auto f = static_cast<float>(t);
+    const double exact = f, next = std::nextafter(f, inf);
+    check(exact);
+    check((exact + next) / 2);  // halfway: the conversion rounds to even, either way
+    check(std::nextafter((exact + next) / 2, 0.0));
+    check(std::nextafter(exact, -1e300));
+    check(std::nextafter(exact, 1e300));
+  }
+  const double edges[] = {0.0,
+                          -0.0,
+                          1e-320,
+                          -1e-320,
+                          0x1p-150,
+                          -0x1p-150,
+                          0x1p-149,
+                          -0x1p-149,
+                          0x1.8p-149,
+                          0x1p-126,
+                          std::nextafter(0x1p-126, 0.0),
+                          1.0,
+                          -1.0,
+                          static_cast<double>(largest),
+                          std::nextafter(static_cast<double>(largest), 1e300),
+                          -static_cast<double>(largest),
+                          std::nextafter(-static_cast<double>(largest), -1e300),
+                          1e300,
+                          -1e300};
+  for (const double t : edges) check(t);
+  CHECK(checked > 1200000);
+}
+
 TEST_CASE("rays: the leaf filter's comparison from t >= 0 accepts every interval the widenings accept",
           "[rays]") {
   // may_hit_from_nonnegative must be conservative: wherever widen_down(t_near) <= widen_up(t_far)

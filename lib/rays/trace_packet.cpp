@@ -22,6 +22,7 @@
 #include "kdspace/boxes/box_tree.hpp"
 #include "kdspace/rays/detail/slab.hpp"
 #include "traversal_ray.hpp"
+#include "walk.hpp"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>

@@ -461,17 +461,16 @@ class Stream {
         if (AnyHit && bound_of[ray_lane] == minus_infinity) continue;  // done at a box before
         const std::uint32_t ray = slots[ray_lane];
         double t_near_exact = range_.t_min, t_far_exact = s_.best_t[ray];
-        if (!clip_to_box(box_in_lane(*block, lane), PreparedRay(batch_ray(ray)), t_near_exact, t_far_exact))
-          continue;
+        const bool hit = clip_to_box(box_in_lane(*block, lane), PreparedRay(batch_ray(ray)), t_near_exact, t_far_exact);
         const auto box = static_cast<std::int32_t>(ids[done + lane]);
         if constexpr (AnyHit) {
+          if (!hit) continue;
           s_.best_t[ray] = t_near_exact;
           s_.best_box[ray] = box;
           s_.best_bound[ray] = bound_of[ray_lane] = minus_infinity;
-        } else if (t_near_exact < s_.best_t[ray] || s_.best_box[ray] == Hit::none || box < s_.best_box[ray]) {
-          s_.best_t[ray] = t_near_exact;
-          s_.best_box[ray] = box;
-          s_.best_bound[ray] = bound_of[ray_lane] = round_up<float>(t_near_exact);
+        } else {
+          keep_if_closer(hit, t_near_exact, box, s_.best_t[ray], s_.best_box[ray], bound_of[ray_lane]);
+          s_.best_bound[ray] = bound_of[ray_lane];
         }
       }
       bound = _mm256_load_ps(bound_of);

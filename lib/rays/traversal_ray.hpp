@@ -95,16 +95,6 @@ inline float to_float_t(double t) {
   return static_cast<float>(t > largest ? largest : t);
 }
 
-/// The smallest float above the finite f.
-inline float next_up(float f) {
-  if (f == 0) return std::numeric_limits<float>::denorm_min();
-  std::uint32_t bits;
-  std::memcpy(&bits, &f, sizeof bits);
-  bits = f > 0 ? bits + 1 : bits - 1;
-  std::memcpy(&f, &bits, sizeof f);
-  return f;
-}
-
 /// The smallest Real >= t (t a double); +-inf stay.
 template <class Real>
 inline Real round_up(double t) {
@@ -113,8 +103,22 @@ inline Real round_up(double t) {
   } else {
     if (!(std::abs(t) <= std::numeric_limits<float>::max()))
       return t > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::max();
+    // One float up where the conversion rounded down, without a branch on it (a hit's t rounds
+    // either way as often): one more in the bits of an f >= +0 (+0 becomes the smallest
+    // subnormal), one less in those of an f < 0 (a range that starts below 0: the branch on the
+    // sign is taken the same way ray after ray). An f of -0 never rounded down: it comes from t = -0
+    // or from a t just below it.
     const auto f = static_cast<float>(t);
-    return f < t ? next_up(f) : f;
+    std::uint32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    const std::uint32_t rounded_down = static_cast<double>(f) < t ? 1u : 0u;
+    if (f < 0)
+      bits -= rounded_down;
+    else
+      bits += rounded_down;
+    float up;
+    std::memcpy(&up, &bits, sizeof up);
+    return up;
   }
 }
 

@@ -41,6 +41,21 @@ struct BestHit {
   Hit hit() const { return box == Hit::none ? Hit{} : Hit{box, to_float_t(t)}; }
 };
 
+/// Where box `box`, hit at t when `hit`, comes before the best hit so far (best_t, best_box: a
+/// smaller t, or the same t and a smaller index), makes it the best and `bound` t rounded up to
+/// Real. Without a branch on the outcome: whether a box that passed the filter is hit, and hit
+/// before the best, is a coin toss that a branch mispredicted about once per exact test (armadillo's
+/// random rays 2-3% faster, Wuson's 5%, rays_walk).
+template <class Real>
+inline void keep_if_closer(bool hit, double t, std::int32_t box, double& best_t, std::int32_t& best_box,
+                           Real& bound) {
+  const bool take = hit & ((t < best_t) | (best_box == Hit::none) | (box < best_box));
+  const Real t_bound = round_up<Real>(t);
+  best_t = take ? t : best_t;
+  best_box = take ? box : best_box;
+  bound = take ? t_bound : bound;
+}
+
 /// Tests the leaf `node`'s boxes against the ray over [t_min, best.t], keeping the closest hit
 /// (equal t: the smaller box index) in `best`; with AnyHit, true as soon as one box is hit (then
 /// `best` holds it). `exact` is the ray in double, made when the first box needs it.
@@ -64,18 +79,15 @@ inline bool test_leaf(const BoxTreeView& tree, const BoxNode& node, const Ray& r
       lanes &= lanes - 1;
       double t_near = t_min, t_far = best.t;
       if (!exact) exact.emplace(ray);
-      if (!clip_to_box(box_in_lane(blocks[lane / 4], lane % 4), *exact, t_near, t_far)) continue;
+      const bool hit = clip_to_box(box_in_lane(blocks[lane / 4], lane % 4), *exact, t_near, t_far);
       const auto box = static_cast<std::int32_t>(ids[lane]);
       if constexpr (AnyHit) {
+        if (!hit) continue;
         best.t = t_near;
         best.box = box;
         return true;
       } else {
-        if (t_near < best.t || best.box == Hit::none || box < best.box) {
-          best.t = t_near;
-          best.box = box;
-          best.bound = round_up<Real>(best.t);
-        }
+        keep_if_closer(hit, t_near, box, best.t, best.box, best.bound);
       }
     }
   }
