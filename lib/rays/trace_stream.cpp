@@ -173,9 +173,10 @@ class Stream {
   Stream(const BoxTree& tree, const Ray* rays, RayRange range, RayStats& stats, StreamScratch& s)
       : tree_(tree), view_(view_of(tree)), rays_(rays), range_(range), stats_(stats), s_(s) {}
 
-  /// Traces rays[ids[0 .. n)], writing hits[ids[i]].
+  /// Traces rays[ids[0 .. n)], writing hits[ids[i]] for those that meet the scene's bounds (the
+  /// others' stay Hit{}).
   void run(const std::uint32_t* ids, std::size_t n, Hit* hits) {
-    admit(ids, n, hits);
+    admit(ids, n);
     s_.tasks.clear();
     if (count_ > 0) s_.tasks.push_back(StreamScratch::Task{0, 0, static_cast<std::uint32_t>(count_)});
     while (!s_.tasks.empty()) {
@@ -190,17 +191,17 @@ class Stream {
       else
         split(node, task);
     }
-    for (std::size_t slot = 0; slot < count_; ++slot) {
-      Hit h;
-      if (s_.best_box[slot] != Hit::none) h = Hit{s_.best_box[slot], to_float_t(s_.best_t[slot])};
-      hits[s_.ray_of[slot]] = h;
+    for (std::size_t slot = 0; slot < count_; ++slot) {  // a miss: Hit{} (t = +inf)
+      const std::int32_t box = s_.best_box[slot];
+      hits[s_.ray_of[slot]] =
+          Hit{box, select_bits(box != Hit::none, to_float_t(s_.best_t[slot]), Hit{}.t)};
     }
   }
 
  private:
   /// A slot for each ray that meets the scene's bounds, with its interval there as the root's set;
   /// the others miss.
-  void admit(const std::uint32_t* ids, std::size_t n, Hit* hits) {
+  void admit(const std::uint32_t* ids, std::size_t n) {
     // 8 slots of slack past n in every per-ray array (by axis too), for admit_avx's whole-register
     // stores.
     capacity_ = n + 8;
@@ -222,15 +223,12 @@ class Stream {
     }
     std::size_t i = 0;
 #if defined(KDSPACE_AVX2_DISPATCH)
-    if constexpr (Wide) i = admit_avx(ids, n, hits);
+    if constexpr (Wide) i = admit_avx(ids, n);
 #endif
     for (; i < n; ++i) {
       const TraversalRay<float> r(rays_[ids[i]]);
       float t_entry = range_.t_min, t_exit = range_.t_max;
-      if (!clip_widened(tree_.bounds(), r, t_entry, t_exit)) {
-        hits[ids[i]] = Hit{};
-        continue;
-      }
+      if (!clip_widened(tree_.bounds(), r, t_entry, t_exit)) continue;  // a miss: hits[ids[i]] stays Hit{}
       const std::size_t slot = count_++;
       for (int a = 0; a < 3; ++a) {
         s_.origin[a * capacity_ + slot] = r.origin[a];
@@ -256,7 +254,7 @@ class Stream {
   /// The same arithmetic as TraversalRay and clip_widened lane by lane (min and max with their
   /// operands in std::min's and std::max's order); a stream's rays have no zero direction
   /// component (the packet range), so no axis is parallel.
-  __attribute__((target("avx2"))) std::size_t admit_avx(const std::uint32_t* ids, std::size_t n, Hit* hits) {
+  __attribute__((target("avx2"))) std::size_t admit_avx(const std::uint32_t* ids, std::size_t n) {
     // Rays are gathered by 32-bit word offsets from the first one: a chunk is far smaller than this.
     if (ids[n - 1] - ids[0] >= (1u << 26)) return 0;
     const float* words = rays_[ids[0]].origin.data();
@@ -308,8 +306,6 @@ class Stream {
       _mm256_storeu_pd(s_.best_t.data() + m, t_max);
       _mm256_storeu_pd(s_.best_t.data() + m + 4, t_max);
       count_ += static_cast<std::size_t>(__builtin_popcount(inside));
-      for (unsigned missed = ~inside & 0xffu; missed != 0; missed &= missed - 1)
-        hits[ids[i + static_cast<unsigned>(__builtin_ctz(missed))]] = Hit{};
     }
     return i;
   }
@@ -432,36 +428,39 @@ class Stream {
                                     _mm256_castsi256_ps(valid));
     const LeafBlock* block = view_.blocks + leaf.first() / 4;
     const std::uint32_t* ids = view_.references + leaf.first();
-    for (std::uint32_t done = 0; done < count; done += 4, ++block) {
-      // The block's boxes are filtered against the rays' bounds at its start, all four before one
-      // branch on the result: a bound lowered by a hit in the block leaves the later boxes' filters
-      // looser, never tighter, and the double test decides alone. Lanes past count (a leaf's last
-      // block repeats its last box) pass nothing.
-      const unsigned lanes = std::min(4u, count - done);
-      std::uint32_t passed_by_lane = 0;  // eight bits (rays) a lane
-      for (unsigned lane = 0; lane < 4; ++lane) {
+    alignas(32) float bound_of[8];  // `bound` by ray, as the double tests lower it
+    _mm256_store_ps(bound_of, bound);
+    for (std::uint32_t done = 0; done < count; done += 8, block += 2) {
+      // Two blocks' boxes are filtered against the rays' bounds at their start, all eight before one
+      // branch on the result: a bound lowered by a hit among them leaves the later boxes' filters
+      // looser, never tighter, and the double test decides alone. A leaf's last block, when alone,
+      // is filtered twice and its copy's lanes pass nothing, as do lanes past count (a leaf's last
+      // block repeats its last box).
+      const LeafBlock* const pair[2] = {block, block + (count - done > 4 ? 1 : 0)};
+      const unsigned lanes = std::min(8u, count - done);
+      std::uint64_t passed_by_lane = 0;  // eight bits (rays) a lane
+      for (unsigned lane = 0; lane < 8; ++lane) {
+        const LeafBlock& b = *pair[lane / 4];
         __m256 t_near = t_low, t_far = bound;
         for (int a = 0; a < 3; ++a) {
           const __m256 t0 =
-              _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(block->plane[enter_plane[a]][lane]), origin[a]), inverse[a]);
+              _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b.plane[enter_plane[a]][lane % 4]), origin[a]), inverse[a]);
           const __m256 t1 =
-              _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(block->plane[leave_plane[a]][lane]), origin[a]), inverse[a]);
+              _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(b.plane[leave_plane[a]][lane % 4]), origin[a]), inverse[a]);
           t_near = _mm256_max_ps(t0, t_near);  // as block_pair_candidates: the second operand for a NaN
           t_far = _mm256_min_ps(t1, t_far);
         }
-        passed_by_lane |= may_hit_from_nonnegative8(t_near, t_far) << (8 * lane);  // t_near >= t_min >= 0
+        passed_by_lane |= std::uint64_t{may_hit_from_nonnegative8(t_near, t_far)} << (8 * lane);  // t_near >= 0
       }
-      passed_by_lane &= lanes == 4 ? ~0u : (1u << (8 * lanes)) - 1;
-      if (passed_by_lane == 0) continue;
-      alignas(32) float bound_of[8];
-      _mm256_store_ps(bound_of, bound);
+      passed_by_lane &= lanes == 8 ? ~std::uint64_t{0} : (std::uint64_t{1} << (8 * lanes)) - 1;
       for (; passed_by_lane != 0; passed_by_lane &= passed_by_lane - 1) {
-        const auto bit = static_cast<unsigned>(__builtin_ctz(passed_by_lane));
+        const auto bit = static_cast<unsigned>(__builtin_ctzll(passed_by_lane));
         const unsigned lane = bit / 8, ray_lane = bit % 8;
         if (AnyHit && bound_of[ray_lane] == minus_infinity) continue;  // done at a box before
         const std::uint32_t ray = slots[ray_lane];
         double t_near_exact = range_.t_min, t_far_exact = s_.best_t[ray];
-        const bool hit = clip_to_box(box_in_lane(*block, lane), PreparedRay(batch_ray(ray)), t_near_exact, t_far_exact);
+        const bool hit = clip_to_box(box_in_lane(*pair[lane / 4], lane % 4), PreparedRay(batch_ray(ray)), t_near_exact,
+                                     t_far_exact);
         const auto box = static_cast<std::int32_t>(ids[done + lane]);
         if constexpr (AnyHit) {
           if (!hit) continue;

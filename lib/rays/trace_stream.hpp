@@ -63,7 +63,8 @@ struct StreamScratch {
 inline constexpr std::size_t stream_min_rays = 4;
 
 /// Traces rays[ids[0 .. n)] through `tree` over `range`, writing hits[ids[i]] and adding to `stats`
-/// exactly what single traces would (hits and counts). The rays must all run the same way (the same
+/// exactly what single traces would (hits and counts). Each hits[ids[i]] must hold Hit{} on entry:
+/// a ray that misses the scene's bounds is left so. The rays must all run the same way (the same
 /// direction signs: detail::packet_key equal and below 8), and the tree must hold boxes within the
 /// float range: the conditions of the float traversal.
 template <bool AnyHit>

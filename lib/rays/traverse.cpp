@@ -263,7 +263,7 @@ std::vector<Hit> BoxTree::trace_batch(const Ray* rays, std::size_t n, RayRange r
     const std::string problem = ray_problem(rays[i]);
     if (!problem.empty()) throw Error("ray " + std::to_string(i + 1) + ": " + problem);
   }
-  std::vector<Hit> hits(n);
+  std::vector<Hit> hits(n);  // all Hit{}: trace_stream leaves a ray that misses the scene so
   const unsigned workers = detail::resolve_threads(threads);
   std::vector<RayStats> per_worker(workers);
 #if defined(__SSE2__)

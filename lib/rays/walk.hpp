@@ -6,6 +6,7 @@
 // answers and the counts are those of single traces.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <optional>
@@ -50,10 +51,9 @@ template <class Real>
 inline void keep_if_closer(bool hit, double t, std::int32_t box, double& best_t, std::int32_t& best_box,
                            Real& bound) {
   const bool take = hit & ((t < best_t) | (best_box == Hit::none) | (box < best_box));
-  const Real t_bound = round_up<Real>(t);
-  best_t = take ? t : best_t;
-  best_box = take ? box : best_box;
-  bound = take ? t_bound : bound;
+  best_t = select_bits(take, t, best_t);
+  best_box = select_bits(take, box, best_box);
+  bound = select_bits(take, round_up<Real>(t), bound);
 }
 
 /// Tests the leaf `node`'s boxes against the ray over [t_min, best.t], keeping the closest hit
@@ -68,15 +68,19 @@ inline bool test_leaf(const BoxTreeView& tree, const BoxNode& node, const Ray& r
   const LeafBlock* blocks = tree.blocks + node.first() / 4;
   const std::uint32_t* ids = tree.references + node.first();
   const Real t_low = static_cast<Real>(t_min);
-  for (std::uint32_t done = 0; done < count; done += 4 * step_blocks, blocks += step_blocks, ids += 4 * step_blocks) {
-    // The lanes past count repeat the leaf's last box (checked when a tree is loaded), so they are
-    // not masked off: a repeated box gives the same hit, which changes nothing (equal t, equal
-    // index), and the mask cost a branch at every block (3.5% of the instructions of a random ray
-    // that hits).
-    unsigned lanes = leaf_step_candidates<Real, Wide>(blocks, count - done, r, t_low, best.bound);
-    while (lanes != 0) {
-      const auto lane = static_cast<unsigned>(__builtin_ctz(lanes));
-      lanes &= lanes - 1;
+  // The filter's steps of up to 64 boxes first, all against the bound at their start, then the
+  // double tests of the boxes they let through: one branch on the outcome per 64 boxes instead of
+  // per step.
+  for (std::uint32_t first = 0; first < count; first += 64) {
+    const std::uint32_t end = std::min<std::uint32_t>(count, first + 64);
+    std::uint64_t passed = 0;
+    for (std::uint32_t done = first; done < end; done += 4 * step_blocks)
+      passed |= std::uint64_t{leaf_step_candidates<Real, Wide>(blocks + done / 4, count - done, r, t_low, best.bound)}
+                << (done - first);
+    passed &= end - first == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << (end - first)) - 1;
+    while (passed != 0) {
+      const std::uint32_t lane = first + static_cast<std::uint32_t>(__builtin_ctzll(passed));
+      passed &= passed - 1;
       double t_near = t_min, t_far = best.t;
       if (!exact) exact.emplace(ray);
       const bool hit = clip_to_box(box_in_lane(blocks[lane / 4], lane % 4), *exact, t_near, t_far);
