@@ -367,7 +367,11 @@ class Stream {
   void at_leaf(const BoxNode& leaf, const StreamScratch::Task& task) {
     std::uint32_t* entering = s_.leaf_rays.data();
     std::size_t n = 0;
-    for (std::uint32_t e = task.begin; e < task.end; ++e) {
+    std::uint32_t e = task.begin;
+#if defined(KDSPACE_AVX2_DISPATCH)
+    if constexpr (Wide) n = entering_avx(task, entering), e = task.end;
+#endif
+    for (; e < task.end; ++e) {
       const std::uint32_t slot = s_.slot[e];
       entering[n] = slot;
       n += widen_down(s_.enter[e]) > s_.best_bound[slot] ? 0 : 1;  // a single trace's pop
@@ -394,6 +398,28 @@ class Stream {
   }
 
 #if defined(KDSPACE_AVX2_DISPATCH)
+  /// at_leaf's pop eight entries at a time (split_entries_avx's test of a ray's bound): the slots of
+  /// the task's rays still short of their best hits, packed into `entering` (8 entries of slack);
+  /// returns their count. A leaf's few rays take one step, whose loop test is then foreseen.
+  __attribute__((target("avx2"))) std::size_t entering_avx(const StreamScratch::Task& task, std::uint32_t* entering) {
+    const __m256i lane_index = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    std::size_t n = 0;
+    for (std::uint32_t e = task.begin; e < task.end; e += 8) {
+      const __m256i valid = _mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(task.end - e)), lane_index);
+      const __m256i slot =
+          _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(s_.slot.data() + e)), valid);
+      const __m256 t_entry = _mm256_loadu_ps(s_.enter.data() + e);
+      const __m256 bound = _mm256_i32gather_ps(s_.best_bound.data(), slot, 4);
+      const __m256 entry_low = _mm256_sub_ps(t_entry, widening8(t_entry));
+      const __m256 alive = _mm256_and_ps(_mm256_cmp_ps(entry_low, bound, _CMP_NGT_UQ), _mm256_castsi256_ps(valid));
+      const auto alive_bits = static_cast<unsigned>(_mm256_movemask_ps(alive));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(entering + n),
+                          _mm256_permutevar8x32_epi32(slot, pack_permutation(alive_bits)));
+      n += static_cast<std::size_t>(__builtin_popcount(alive_bits));
+    }
+    return n;
+  }
+
   /// test_leaf for the rays slots[0 .. rays) (at most 8), all of them against one box at a time: for each
   /// ray the float filter's parameters (block_pair_candidates' operations in its order), compared by
   /// may_hit_from_nonnegative (a range whose t_min >= 0: at_leaf sends no other), and the same double
@@ -488,7 +514,9 @@ class Stream {
     const int axis = node.axis();
     const std::uint32_t left = task.node + 1, right = node.right_child();
     const bool towards_negative = (negative_ >> axis) & 1u;
-    const std::uint32_t near = towards_negative ? right : left, far = towards_negative ? left : right;
+    // Chosen by masking, not by a branch on the octant's sign (mispredicted when octants alternate).
+    const std::uint32_t swap = (left ^ right) & (0u - static_cast<std::uint32_t>(towards_negative));
+    const std::uint32_t near = left ^ swap, far = right ^ swap;
     const Split plane{node.split(), s_.origin.data() + axis * capacity_, s_.inverse.data() + axis * capacity_,
                       s_.best_bound.data()};
     const std::size_t near_begin = top + count + 8;
