@@ -131,6 +131,10 @@ __attribute__((target("avx2"))) inline std::uint64_t split_entries_avx(const Spl
   const __m256 split = _mm256_set1_ps(node.split);
   const __m256i lane_index = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   std::uint64_t visited = 0;
+  // The set ends and the node's arrays in locals: through the references, the compiler reloaded
+  // them from memory after every store to the entry arrays.
+  std::size_t near_at = near_end, far_at = far_end;
+  const float *const origins = node.origin, *const inverses = node.inverse, *const bounds = node.bound;
   for (std::uint32_t e = begin; e < end; e += 8) {
     // Lanes past `end` read entries that are not the set's: their slot is taken as 0 and they are
     // dropped from both children.
@@ -138,9 +142,9 @@ __attribute__((target("avx2"))) inline std::uint64_t split_entries_avx(const Spl
     const __m256i ray =
         _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(slot + e)), valid);
     const __m256 t_entry = _mm256_loadu_ps(enter + e), t_exit = _mm256_loadu_ps(exit + e);
-    const __m256 bound = _mm256_i32gather_ps(node.bound, ray, 4);
-    const __m256 origin = _mm256_i32gather_ps(node.origin, ray, 4);
-    const __m256 inverse = _mm256_i32gather_ps(node.inverse, ray, 4);
+    const __m256 bound = _mm256_i32gather_ps(bounds, ray, 4);
+    const __m256 origin = _mm256_i32gather_ps(origins, ray, 4);
+    const __m256 inverse = _mm256_i32gather_ps(inverses, ray, 4);
     const __m256 entry_low = _mm256_sub_ps(t_entry, widening8(t_entry));
     const __m256 exit_high = _mm256_add_ps(t_exit, widening8(t_exit));
     const __m256 alive = _mm256_and_ps(_mm256_cmp_ps(entry_low, bound, _CMP_NGT_UQ), _mm256_castsi256_ps(valid));
@@ -153,15 +157,17 @@ __attribute__((target("avx2"))) inline std::uint64_t split_entries_avx(const Spl
         static_cast<unsigned>(_mm256_movemask_ps(_mm256_and_ps(_mm256_or_ps(far_only, reaches_far), alive)));
     visited += static_cast<std::uint64_t>(__builtin_popcount(alive_bits));
     const __m256i near_order = pack_permutation(near_bits), far_order = pack_permutation(far_bits);
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(slot + near_end), _mm256_permutevar8x32_epi32(ray, near_order));
-    _mm256_storeu_ps(enter + near_end, _mm256_permutevar8x32_ps(t_entry, near_order));
-    _mm256_storeu_ps(exit + near_end, _mm256_permutevar8x32_ps(_mm256_min_ps(t_split, t_exit), near_order));
-    near_end += static_cast<std::size_t>(__builtin_popcount(near_bits));
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(slot + far_end), _mm256_permutevar8x32_epi32(ray, far_order));
-    _mm256_storeu_ps(enter + far_end, _mm256_permutevar8x32_ps(_mm256_max_ps(t_split, t_entry), far_order));
-    _mm256_storeu_ps(exit + far_end, _mm256_permutevar8x32_ps(t_exit, far_order));
-    far_end += static_cast<std::size_t>(__builtin_popcount(far_bits));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(slot + near_at), _mm256_permutevar8x32_epi32(ray, near_order));
+    _mm256_storeu_ps(enter + near_at, _mm256_permutevar8x32_ps(t_entry, near_order));
+    _mm256_storeu_ps(exit + near_at, _mm256_permutevar8x32_ps(_mm256_min_ps(t_split, t_exit), near_order));
+    near_at += static_cast<std::size_t>(__builtin_popcount(near_bits));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(slot + far_at), _mm256_permutevar8x32_epi32(ray, far_order));
+    _mm256_storeu_ps(enter + far_at, _mm256_permutevar8x32_ps(_mm256_max_ps(t_split, t_entry), far_order));
+    _mm256_storeu_ps(exit + far_at, _mm256_permutevar8x32_ps(t_exit, far_order));
+    far_at += static_cast<std::size_t>(__builtin_popcount(far_bits));
   }
+  near_end = near_at;
+  far_end = far_at;
   return visited;
 }
 #endif
