@@ -44,9 +44,9 @@ struct BestHit {
 
 /// Where box `box`, hit at t when `hit`, comes before the best hit so far (best_t, best_box: a
 /// smaller t, or the same t and a smaller index), makes it the best and `bound` t rounded up to
-/// Real. Without a branch on the outcome: whether a box that passed the filter is hit, and hit
-/// before the best, is a coin toss that a branch mispredicted about once per exact test (armadillo's
-/// random rays 2-3% faster, Wuson's 5%, rays_walk).
+/// Real. Without a branch on the outcome (select_bits): whether a box that passed the filter is
+/// hit, and hit before the best, is a coin toss that a branch mispredicted about once per exact
+/// test.
 template <class Real>
 inline void keep_if_closer(bool hit, double t, std::int32_t box, double& best_t, std::int32_t& best_box,
                            Real& bound) {
