@@ -119,6 +119,13 @@ __attribute__((target("avx2"))) inline __m256 widening8(__m256 t) {
                        _mm256_set1_ps(Widening<float>::absolute));
 }
 
+/// Per lane: whether the entry's ray is still short of its best hit on entering the cell (a single
+/// trace's pop: t_entry widened down, entry_low, not above the ray's bound); lanes not `valid`, none.
+/// The test of split_entries_avx and of a leaf's entering rays (entering_avx).
+__attribute__((target("avx2"))) inline __m256 still_short8(__m256 entry_low, __m256 bound, __m256i valid) {
+  return _mm256_and_ps(_mm256_cmp_ps(entry_low, bound, _CMP_NGT_UQ), _mm256_castsi256_ps(valid));
+}
+
 /// split_entries eight entries at a time: the same arithmetic and comparisons lane by lane (MINPS
 /// and MAXPS return their second operand for a NaN, as the scalar selects do), the chosen lanes
 /// packed by a permutation and stored whole (the lanes past the count are overwritten later, or
@@ -147,7 +154,7 @@ __attribute__((target("avx2"))) inline std::uint64_t split_entries_avx(const Spl
     const __m256 inverse = _mm256_i32gather_ps(inverses, ray, 4);
     const __m256 entry_low = _mm256_sub_ps(t_entry, widening8(t_entry));
     const __m256 exit_high = _mm256_add_ps(t_exit, widening8(t_exit));
-    const __m256 alive = _mm256_and_ps(_mm256_cmp_ps(entry_low, bound, _CMP_NGT_UQ), _mm256_castsi256_ps(valid));
+    const __m256 alive = still_short8(entry_low, bound, valid);
     const __m256 t_split = _mm256_mul_ps(_mm256_sub_ps(split, origin), inverse);
     const __m256 far_only = _mm256_cmp_ps(t_split, entry_low, _CMP_LT_OQ);
     const __m256 reaches_far = _mm256_cmp_ps(t_split, exit_high, _CMP_NGT_UQ);
@@ -375,7 +382,10 @@ class Stream {
     std::size_t n = 0;
     std::uint32_t e = task.begin;
 #if defined(KDSPACE_AVX2_DISPATCH)
-    if constexpr (Wide) n = entering_avx(task, entering), e = task.end;
+    if constexpr (Wide) {
+      n = entering_avx(task, entering);
+      e = task.end;
+    }
 #endif
     for (; e < task.end; ++e) {
       const std::uint32_t slot = s_.slot[e];
@@ -404,7 +414,7 @@ class Stream {
   }
 
 #if defined(KDSPACE_AVX2_DISPATCH)
-  /// at_leaf's pop eight entries at a time (split_entries_avx's test of a ray's bound): the slots of
+  /// at_leaf's pop eight entries at a time (still_short8, as split_entries_avx): the slots of
   /// the task's rays still short of their best hits, packed into `entering` (8 entries of slack);
   /// returns their count. A leaf's few rays take one step, whose loop test is then foreseen.
   __attribute__((target("avx2"))) std::size_t entering_avx(const StreamScratch::Task& task, std::uint32_t* entering) {
@@ -416,8 +426,7 @@ class Stream {
           _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(s_.slot.data() + e)), valid);
       const __m256 t_entry = _mm256_loadu_ps(s_.enter.data() + e);
       const __m256 bound = _mm256_i32gather_ps(s_.best_bound.data(), slot, 4);
-      const __m256 entry_low = _mm256_sub_ps(t_entry, widening8(t_entry));
-      const __m256 alive = _mm256_and_ps(_mm256_cmp_ps(entry_low, bound, _CMP_NGT_UQ), _mm256_castsi256_ps(valid));
+      const __m256 alive = still_short8(_mm256_sub_ps(t_entry, widening8(t_entry)), bound, valid);
       const auto alive_bits = static_cast<unsigned>(_mm256_movemask_ps(alive));
       _mm256_storeu_si256(reinterpret_cast<__m256i*>(entering + n),
                           _mm256_permutevar8x32_epi32(slot, pack_permutation(alive_bits)));
