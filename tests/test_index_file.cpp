@@ -746,7 +746,7 @@ TEST_CASE("index: the check in pieces decides as the one-thread check, on any nu
     const std::string sound =
         "depth " + std::to_string(tree.depth()) + ", leaves " + std::to_string(tree.leaf_count());
     for (const kdspace::Verify verify : {kdspace::Verify::full, kdspace::Verify::safety})
-      for (unsigned threads : {1u, 2u, 3u, 5u, 8u}) {
+      for (unsigned threads : {0u, 1u, 2u, 3u, 5u, 8u}) {  // 0: as many as pay for their start
         CAPTURE(threads);
         REQUIRE(verdict(threads, verify) == sound);
       }
@@ -791,6 +791,28 @@ TEST_CASE("index: the check in pieces decides as the one-thread check, on any nu
     }
     CHECK(refused > trials / 2);
   }
+}
+
+TEST_CASE("index: a check left to choose its threads starts as many as pay for their start", "[index]") {
+  // About the square root of the MiB checked, at least one, at most what the hardware has; never
+  // fewer for a larger file.
+  using kdspace::detail::check_threads_that_pay;
+  constexpr std::size_t MiB = std::size_t{1} << 20;
+  CHECK(check_threads_that_pay(0, 16) == 1);
+  CHECK(check_threads_that_pay(MiB, 16) == 1);
+  CHECK(check_threads_that_pay(4 * MiB, 16) == 2);
+  CHECK(check_threads_that_pay(17984536, 16) == 4);  // the index of 1e6 3-D float points
+  CHECK(check_threads_that_pay(256 * MiB, 16) == 16);
+  CHECK(check_threads_that_pay(std::size_t{1} << 34, 16) == 16);
+  CHECK(check_threads_that_pay(17984536, 2) == 2);
+  CHECK(check_threads_that_pay(17984536, 0) == 1);  // hardware_concurrency() may say 0: one thread
+  unsigned before = 1;
+  for (std::size_t bytes = 1; bytes < (std::size_t{1} << 36); bytes = bytes * 3 / 2 + 1) {
+    const unsigned threads = check_threads_that_pay(bytes, 64);
+    REQUIRE(threads >= before);
+    before = threads;
+  }
+  CHECK(before == 64);
 }
 
 TEST_CASE("index: a full disk mid-save leaves the old file intact, and no temporary file",

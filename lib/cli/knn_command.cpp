@@ -406,6 +406,14 @@ io::Matrix<T> read_queries_for_index(const SearchJob& job, std::size_t dim, std:
   return queries;
 }
 
+// How a load shows progress: with a ticker (a thread of its own) only for a file of 64 MiB or more,
+// which a disk of 100 MB/s could take a second to bring in; a smaller file's load would pay the
+// thread's start (tens of microseconds) inside load_s and never show anything.
+Progress::Kind load_progress(const io::IndexFile& file) {
+  constexpr std::uint64_t ticker_bytes = std::uint64_t{64} << 20;
+  return file.info().file_bytes >= ticker_bytes ? Progress::Kind::elapsed : Progress::Kind::fraction;
+}
+
 // Loads the tree of `file` (a PointTree or a DynamicPointTree) and searches it.
 template <class T, class Metric>
 int search_tree_index(const SearchJob& job, const std::shared_ptr<const io::IndexFile>& file,
@@ -414,7 +422,7 @@ int search_tree_index(const SearchJob& job, const std::shared_ptr<const io::Inde
     throw UsageError(std::string(job.checks > 0 ? "--checks" : "--ef") + " applies to forests; " + job.index +
                      " holds a point tree");
   auto load_and_search = [&](auto load) {
-    Progress progress("loading " + job.index, Progress::Kind::elapsed);
+    Progress progress("loading " + job.index, load_progress(*file));
     const auto tree = load();
     Origin origin;
     origin.load_s = seconds_since(start);
@@ -436,7 +444,7 @@ int search_forest_index(const SearchJob& job, const std::shared_ptr<const io::In
                         Clock::time_point start) {
   if (job.mode != Mode::knn) throw Error(job.index + ": holds a point forest, which answers knn only");
   if (job.eps > 0) throw UsageError("--eps applies to trees; " + job.index + " holds a point forest (use --checks)");
-  Progress progress("loading " + job.index, Progress::Kind::elapsed);
+  Progress progress("loading " + job.index, load_progress(*file));
   ForestSearchParams stored;
   const PointForest<T> forest =
       io::load_with_checksums(file, [&](const auto& f) { return io::load_point_forest<T>(f, &stored); });

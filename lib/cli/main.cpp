@@ -39,8 +39,8 @@ Results: IDS.ivecs holds one row per query: 0-based indices of base points, near
   (exit 1), never silently shortened.
 -r R: a finite number >= 0 in the data's units (not squared); a negative or NaN radius is a usage error.
   --max-results M keeps only the M nearest within R.
---threads T: 0 (the default) uses all hardware threads, for the build (or the check of a loaded index)
-  and for the queries.
+--threads T: 0 (the default) uses all hardware threads, for the build and for the queries; the check of a
+  loaded index runs on as many as pay for their start (about the square root of the MiB it reads).
 --stats: one JSON object on stdout: build_s, query_s, queries_per_s, threads, depth, leaves,
   nodes_visited_per_query, points_visited_per_query, points, dim, queries, k or radius, metric, index_bytes.
   Times are wall seconds of that phase alone, without file I/O.

@@ -50,7 +50,7 @@ std::uint32_t update_software(std::uint32_t c, const unsigned char* p, std::size
 }
 
 // a(x) * b(x) mod P(x), reflected. Walks a's coefficients from x^0 up while b is multiplied by x.
-std::uint32_t multiply(std::uint32_t a, std::uint32_t b) {
+constexpr std::uint32_t multiply(std::uint32_t a, std::uint32_t b) {
   std::uint32_t product = 0;
   for (std::uint32_t bit = 0x80000000u; bit != 0; bit >>= 1) {
     if (a & bit) product ^= b;
@@ -91,21 +91,31 @@ std::uint32_t multiply_fast(std::uint32_t a, std::uint32_t b) {
 }
 
 // x^(8 * 2^k) mod P for k < 64, by squaring.
-std::array<std::uint32_t, 64> make_zero_powers() {
+constexpr std::array<std::uint32_t, 64> make_zero_powers() {
   std::array<std::uint32_t, 64> powers{};
   powers[0] = 0x00800000u;  // x^8: one zero byte
   for (std::size_t k = 1; k < powers.size(); ++k) powers[k] = multiply(powers[k - 1], powers[k - 1]);
   return powers;
 }
 
+constexpr std::array<std::uint32_t, 64> zero_powers = make_zero_powers();
+
 // x^(8 * bytes) mod P: multiplying a register by it appends that many zero bytes. A product of the
 // powers above, one a bit of `bytes`; with pclmul, a few dozen instructions in all (combining the
 // checksums of a file's pieces runs it once a piece).
 std::uint32_t zeros_operator(std::size_t bytes) {
-  static const std::array<std::uint32_t, 64> powers = make_zero_powers();
   std::uint32_t result = 0x80000000u;  // x^0
   for (std::size_t k = 0; bytes > 0; bytes >>= 1, ++k)
-    if (bytes & 1u) result = multiply_fast(result, powers[k]);
+    if (bytes & 1u) result = multiply_fast(result, zero_powers[k]);
+  return result;
+}
+
+// zeros_operator() for constants, worked out by the compiler (a fresh process that loads an index
+// would otherwise spend tens of microseconds on them, bit by bit).
+constexpr std::uint32_t zeros_constant(std::size_t bytes) {
+  std::uint32_t result = 0x80000000u;  // x^0
+  for (std::size_t k = 0; bytes > 0; bytes >>= 1, ++k)
+    if (bytes & 1u) result = multiply(result, zero_powers[k]);
   return result;
 }
 
@@ -128,7 +138,7 @@ __attribute__((target("sse4.2"))) std::uint32_t update_hardware(std::uint32_t c,
   // The crc32 instruction has a latency of 3 cycles and a throughput of 1: three independent
   // streams over consecutive blocks keep it busy. update(c, A B C) =
   // shift(shift(update(c, A), |B|) ^ update(0, B), |C|) ^ update(0, C).
-  static const std::uint32_t shift = zeros_operator(stream_bytes);
+  static constexpr std::uint32_t shift = zeros_constant(stream_bytes);
   std::uint64_t c0 = c;
   for (; n >= 3 * stream_bytes; n -= 3 * stream_bytes, p += 3 * stream_bytes) {
     std::uint64_t c1 = 0, c2 = 0;
@@ -153,7 +163,7 @@ __attribute__((target("sse4.2"))) std::uint32_t update_hardware(std::uint32_t c,
 }
 
 // x^n mod P, reflected.
-std::uint32_t x_to_the(std::size_t n) {
+constexpr std::uint32_t x_to_the(std::size_t n) {
   std::uint32_t result = 0x80000000u;  // x^0
   std::uint32_t power = 0x40000000u;   // x^1
   for (; n > 0; n >>= 1) {
@@ -173,7 +183,7 @@ std::uint32_t x_to_the(std::size_t n) {
 struct FoldConstants {
   std::uint64_t high, low;  // for H (the lane's low word) and for L (its high word)
 };
-FoldConstants fold_by(std::size_t bytes) {
+constexpr FoldConstants fold_by(std::size_t bytes) {
   return {std::uint64_t{x_to_the(8 * bytes + 63)} << 32, std::uint64_t{x_to_the(8 * bytes - 1)} << 32};
 }
 
@@ -209,8 +219,9 @@ constexpr std::size_t fold_prefetch_bytes = 8192;
 
 __attribute__((target("avx512f,vpclmulqdq,pclmul,sse4.2"))) std::uint32_t update_folding(
     std::uint32_t c, const unsigned char* p, std::size_t n) {
-  static const FoldConstants by256 = fold_by(256), by192 = fold_by(192), by128 = fold_by(128),
-                             by64 = fold_by(64), by48 = fold_by(48), by32 = fold_by(32), by16 = fold_by(16);
+  static constexpr FoldConstants by256 = fold_by(256), by192 = fold_by(192), by128 = fold_by(128),
+                                 by64 = fold_by(64), by48 = fold_by(48), by32 = fold_by(32),
+                                 by16 = fold_by(16);
   // The register enters as the first four bytes' xor (update(c, M) = update(0, M ^ c)).
   __m512i x0 =
       _mm512_xor_si512(_mm512_loadu_si512(p), _mm512_zextsi128_si512(_mm_cvtsi32_si128(static_cast<int>(c))));

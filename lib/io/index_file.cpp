@@ -446,10 +446,9 @@ std::uint64_t IndexFile::ChecksumPass::stream(std::size_t k, std::size_t piece, 
   s.crc = io::detail::crc32c_extend(s.crc, file_.bytes_ + section.offset + s.done,
                                     static_cast<std::size_t>(to - s.done));
   s.done = to;
-  // The next step's bytes are asked for now, so that they arrive while the walk reads these.
-  const unsigned char* next = file_.bytes_ + section.offset + to;
-  const std::uint64_t ahead = std::min(stream_step_bytes, s.end - to);
-  for (std::uint64_t at = 0; at < ahead; at += 64) __builtin_prefetch(next + at);
+  // No prefetch of the next step: the reads run front to back, which the processor's own prefetcher
+  // follows. Asking for each of the step's cache lines as well (a prefetch every 64 bytes) made a
+  // one-thread load of 1e6 3-D points 6-8% slower.
   return to;
 }
 

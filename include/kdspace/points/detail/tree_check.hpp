@@ -61,8 +61,8 @@ struct PointTreeParts {
   std::vector<T> root_lo, root_hi;  ///< bounds of all points (the root cell)
   std::shared_ptr<const void> backing;
   CheckCompanion* companion = nullptr;  ///< work the check runs beside (not owned; used while it runs)
-  unsigned check_threads = 2;           ///< 1: the check runs on the calling thread alone; 0: on all
-                                        ///< hardware threads
+  unsigned check_threads = 2;           ///< 1: the check runs on the calling thread alone; 0: on as many
+                                        ///< as pay for their start (check_threads_that_pay)
   bool wide_kernels = true;  ///< false: the baseline loops alone, even where AVX2 runs (tests compare them)
   Verify verify = Verify::full;  ///< how much the check establishes (params.hpp)
 };
@@ -77,6 +77,22 @@ struct TreeShape {
 /// thread's start costs tens of microseconds, the check a few nanoseconds a point).
 inline constexpr std::size_t parallel_tree_check = std::size_t{1} << 17;
 
+/// What one thread checks (and checksums) in about the time it takes to start another: 1 MiB. Measured
+/// here, a fresh process loads 1e6 3-D float points (18 MB) in 0.8-0.9 ms on one thread, about 20
+/// bytes a nanosecond, and starts its first thread in 45-100 microseconds, each further one in 20-40.
+inline constexpr std::size_t check_bytes_a_thread_start = std::size_t{1} << 20;
+
+/// The threads a check of `bytes` runs on when left to choose: starting T threads one after another
+/// costs the caller T starts, sharing the work saves (T - 1) / T of it, and the sum of the two is least
+/// near T = sqrt(bytes / check_bytes_a_thread_start). So 2 threads from 4 MiB, 4 from 16 MiB, 16 from
+/// 256 MiB; at most `hardware`, at least 1. (On a machine of many processors, starting them all for a
+/// file of a few megabytes would cost more than the check itself.)
+inline unsigned check_threads_that_pay(std::size_t bytes, unsigned hardware) {
+  const auto pay = static_cast<unsigned>(
+      std::sqrt(static_cast<double>(bytes) / static_cast<double>(check_bytes_a_thread_start)));
+  return std::clamp(pay, 1u, std::max(hardware, 1u));
+}
+
 /// The parallel check hands out subtrees of at most 1/(tree_check_pieces_a_thread * threads) of the
 /// nodes: enough that threads which start late (a thread's start costs tens of microseconds, a
 /// sleeping processor's wake more) still find some of the tree to share, and that all finish together.
@@ -90,7 +106,12 @@ class TreeChecker {
         n_(p.order.size()),
         dim_(p.dim),
         full_(p.verify == Verify::full),
-        kernels_(p.wide_kernels && tree_check_kernels()) {}
+        kernels_(p.wide_kernels && tree_check_kernels()),
+        threads_(p.check_threads != 0
+                     ? p.check_threads
+                     : check_threads_that_pay(p.points.size() * sizeof(T) + n_ * sizeof(std::uint32_t) +
+                                                  p.nodes.size() * sizeof(PointNode<T>),
+                                              resolve_threads(0))) {}
 
   TreeShape run() {
     if (dim_ == 0) fail("dimension 0");
@@ -107,7 +128,7 @@ class TreeChecker {
     for (std::size_t a = 0; a < dim_; ++a)
       if (!std::isfinite(p_.root_lo[a]) || !std::isfinite(p_.root_hi[a]) || p_.root_lo[a] > p_.root_hi[a])
         fail("bounds of coordinate " + std::to_string(a + 1) + " are not finite and ordered");
-    if (n_ >= parallel_tree_check && resolve_threads(p_.check_threads) > 1) {
+    if (n_ >= parallel_tree_check && threads_ > 1) {
       try {
         if (std::optional<TreeShape> shape = run_in_pieces()) return *shape;
       } catch (const Error&) {
@@ -197,8 +218,7 @@ class TreeChecker {
   // starts over on one thread, whose message names it.
   std::optional<TreeShape> run_in_pieces() {
     const std::size_t nodes = p_.nodes.size();
-    const std::size_t largest =
-        std::max<std::size_t>(nodes / (tree_check_pieces_a_thread * resolve_threads(p_.check_threads)), 1);
+    const std::size_t largest = std::max<std::size_t>(nodes / (tree_check_pieces_a_thread * threads_), 1);
     std::vector<Piece> pieces;
     std::vector<Piece> pending{{0, nodes, 0, 0, p_.root_lo, p_.root_hi}};
     while (!pending.empty()) {  // depth first, left before right: node order
@@ -240,8 +260,7 @@ class TreeChecker {
     }
 
     // Each worker walks a Walk of its own, a piece at a time (parallel_for's counter hands them out).
-    const unsigned workers =
-        static_cast<unsigned>(std::min<std::size_t>(resolve_threads(p_.check_threads), pieces.size()));
+    const unsigned workers = static_cast<unsigned>(std::min<std::size_t>(threads_, pieces.size()));
     std::vector<Walk> walks;
     for (unsigned w = 0; w < workers; ++w) walks.push_back(new_walk(p_.companion));
     parallel_for(pieces.size(), workers, 1, [&](std::size_t first, std::size_t end, unsigned worker) {
@@ -598,6 +617,7 @@ class TreeChecker {
   std::size_t n_, dim_;
   bool full_;                      // Verify::full
   [[maybe_unused]] bool kernels_;  // tree_check_kernels(), read once (unused without AVX2 dispatch)
+  unsigned threads_;               // the threads the check may run on (PointTreeParts::check_threads)
 };
 
 /// Checks parts from outside (see the top of this file); throws Error("point tree: node 12: ...").
