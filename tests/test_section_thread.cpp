@@ -3,7 +3,9 @@
 // process may use more than one, and then may run anywhere the parent may.
 #include <atomic>
 #include <catch2/catch.hpp>
+#include <chrono>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -32,6 +34,49 @@ TEST_CASE("a SectionThread runs its work once and is waited for, moved or not", 
   threads.clear();  // the destructors wait
   moved.join();
   REQUIRE(runs.load() == 4);
+}
+
+namespace {
+// Counts its destructions: a body holding one by value shows when the body was destroyed.
+struct Destructions {
+  std::atomic<int>* count;
+  explicit Destructions(std::atomic<int>* c) : count(c) {}
+  Destructions(const Destructions& other) : count(other.count) {}
+  ~Destructions() { count->fetch_add(1); }
+};
+}  // namespace
+
+TEST_CASE("a SectionThread's finish() returns once its body has returned and been destroyed", "[threads]") {
+  // finish() does not wait for the thread's exit, only for the body; what the body wrote and the
+  // destruction of what it held are seen after it, whether the body ends within the spin or long after.
+  for (int round = 0; round < 300; ++round) {
+    std::atomic<int> destroyed{0};
+    std::atomic<bool> go{false};
+    int written = 0;  // plain memory: finish() must order the body's write before the read below
+    {
+      SectionThread t([&written, &go, held = Destructions(&destroyed)] {
+        while (!go.load()) std::this_thread::yield();
+        written = 1 + (held.count != nullptr);
+      });
+      const int before = destroyed.load();  // the copies made while starting; the body's is still held
+      go.store(true);
+      t.finish();
+      REQUIRE(written == 2);
+      REQUIRE(destroyed.load() >= before + 1);
+      t.finish();  // nothing left to wait for
+      t.join();
+    }
+  }
+  int late = 0;
+  SectionThread slow([&late] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // far longer than finish()'s spin
+    late = 1;
+  });
+  slow.finish();
+  REQUIRE(late == 1);
+  SectionThread moved = std::move(slow);
+  slow.finish();  // moved from: nothing
+  moved.finish();
 }
 
 TEST_CASE("parallel_for and fork_join still hand back the first error, on their threads", "[threads]") {

@@ -53,7 +53,7 @@ void parallel_for(std::size_t n, unsigned threads, std::size_t chunk, Body&& bod
     // No more threads to be had: the ones started and this one share the work.
   }
   run(0);
-  for (auto& t : pool) t.join();
+  for (auto& t : pool) t.finish();
   for (const auto& e : errors)
     if (e) std::rethrow_exception(e);  // the first error, on the calling thread
 }
@@ -80,10 +80,10 @@ void fork_join(Left&& left, Right&& right) {
   try {
     right();
   } catch (...) {
-    worker->join();
+    worker->finish();
     throw;
   }
-  worker->join();
+  worker->finish();
   if (left_error) std::rethrow_exception(left_error);
 }
 
