@@ -11,7 +11,7 @@
 // the parent may use one processor only, or the affinity cannot be read, it starts as any thread.
 //
 // A section ends with finish(), not join(): a thread's exit after its body has returned (glibc's and
-// the kernel's, then waking the joiner) took 40-75 microseconds on the test machine, one tenth of an
+// the kernel's, then waking the joiner) took 48-75 microseconds on the test machine, one tenth of an
 // index's load. finish() waits for the body alone, spinning briefly since the body's end is usually
 // near when the parent asks, and lets the thread's exit run on without it.
 #pragma once
@@ -156,7 +156,6 @@ class SectionThread {
   }
 
 #if defined(KDSPACE_PLACED_THREADS)
-
   pthread_t handle_{};
   bool joinable_ = false;
 #else
