@@ -38,20 +38,18 @@ class SectionThread {
   /// Starts body() on a new thread. Throws std::system_error where no thread can be had. (Not for a
   /// SectionThread itself: copying one is deleted, moving one is the move constructor.)
   template <class Body, std::enable_if_t<!std::is_same_v<std::decay_t<Body>, SectionThread>, int> = 0>
-  explicit SectionThread(Body&& body) : done_(std::make_shared<std::atomic<bool>>(false)) {
-    auto task = std::make_unique<Task<std::decay_t<Body>>>(std::forward<Body>(body));
-    task->done = done_;
+  explicit SectionThread(Body&& body) : task_(std::make_unique<Task<std::decay_t<Body>>>(std::forward<Body>(body))) {
+    TaskBase* task = task_.get();
 #if defined(KDSPACE_PLACED_THREADS)
     pthread_attr_t attr;
     if (const int error = pthread_attr_init(&attr)) throw std::system_error(error, std::generic_category());
     place_elsewhere(attr, *task);
-    const int error = pthread_create(&handle_, &attr, &run_task, task.get());
+    const int error = pthread_create(&handle_, &attr, &run_task, task);
     pthread_attr_destroy(&attr);
     if (error) throw std::system_error(error, std::generic_category(), "cannot start a thread");
-    task.release();  // the thread owns it now
     joinable_ = true;
 #else
-    thread_ = std::thread([task = std::move(task)]() mutable { finish_task(std::move(task)); });
+    thread_ = std::thread([task] { run_body(*task); });
 #endif
   }
   SectionThread(const SectionThread&) = delete;
@@ -68,7 +66,7 @@ class SectionThread {
 #else
       thread_ = std::move(other.thread_);
 #endif
-      done_ = std::move(other.done_);
+      task_ = std::move(other.task_);
     }
     return *this;
   }
@@ -80,9 +78,9 @@ class SectionThread {
   /// Waits for body() to return, and no longer: the thread then ends on its own. Spins (yielding now
   /// and then, should the body need this processor) for up to `spin` before it sleeps in a join.
   void finish(std::chrono::microseconds spin = std::chrono::microseconds(200)) {
-    if (!done_) return;
+    if (!task_) return;
     const auto give_up = std::chrono::steady_clock::now() + spin;
-    for (unsigned tries = 1; !done_->load(std::memory_order_acquire); ++tries)
+    for (unsigned tries = 1; !task_->done.load(std::memory_order_acquire); ++tries)
       if (tries % 64 == 0) {
         if (std::chrono::steady_clock::now() > give_up) return join();
         std::this_thread::yield();
@@ -109,7 +107,7 @@ class SectionThread {
   struct TaskBase {
     virtual ~TaskBase() = default;
     virtual void call() = 0;
-    std::shared_ptr<std::atomic<bool>> done;  // set once the body has returned and is destroyed
+    std::atomic<bool> done{false};  // set once the body has returned
 #if defined(KDSPACE_PLACED_THREADS)
     cpu_set_t parents_set;  // the processors the parent may use, taken back first thing
     bool take_back = false;
@@ -135,24 +133,24 @@ class SectionThread {
     task.take_back = pthread_attr_setaffinity_np(&attr, sizeof others, &others) == 0;
   }
   static void* run_task(void* p) {
-    std::unique_ptr<TaskBase> task(static_cast<TaskBase*>(p));
-    if (task->take_back)
-      (void)pthread_setaffinity_np(pthread_self(), sizeof task->parents_set, &task->parents_set);
-    finish_task(std::move(task));
+    TaskBase& task = *static_cast<TaskBase*>(p);
+    if (task.take_back)
+      (void)pthread_setaffinity_np(pthread_self(), sizeof task.parents_set, &task.parents_set);
+    run_body(task);
     return nullptr;
   }
 #endif
 
-  // Runs the body, destroys it, then says so: after that the thread touches nothing of the parent's.
-  static void finish_task(std::unique_ptr<TaskBase> task) {
+  // Runs the body, then says so: after that the thread touches nothing of the parent's, not even the
+  // task, which the SectionThread owns and destroys (freeing it here made the thread's first call to
+  // the allocator, which set up an arena of its own: some 20 microseconds before `done`).
+  static void run_body(TaskBase& task) {
     try {
-      task->call();
+      task.call();
     } catch (...) {
       std::terminate();  // as for an exception out of a std::thread's function
     }
-    const std::shared_ptr<std::atomic<bool>> done = std::move(task->done);
-    task.reset();
-    done->store(true, std::memory_order_release);
+    task.done.store(true, std::memory_order_release);
   }
 
 #if defined(KDSPACE_PLACED_THREADS)
@@ -161,7 +159,7 @@ class SectionThread {
 #else
   std::thread thread_;
 #endif
-  std::shared_ptr<std::atomic<bool>> done_;  // null once moved from
+  std::unique_ptr<TaskBase> task_;  // the body and its flag; null once moved from
 };
 
 }  // namespace kdspace::detail
