@@ -59,6 +59,17 @@ constexpr std::uint32_t multiply(std::uint32_t a, std::uint32_t b) {
   return product;
 }
 
+// x^n mod P, reflected.
+constexpr std::uint32_t x_to_the(std::size_t n) {
+  std::uint32_t result = 0x80000000u;  // x^0
+  std::uint32_t power = 0x40000000u;   // x^1
+  for (; n > 0; n >>= 1) {
+    if (n & 1u) result = multiply(result, power);
+    power = multiply(power, power);
+  }
+  return result;
+}
+
 #if defined(__x86_64__)
 bool has_sse42() {
   static const bool yes = __builtin_cpu_supports("sse4.2");
@@ -110,15 +121,6 @@ std::uint32_t zeros_operator(std::size_t bytes) {
   return result;
 }
 
-// zeros_operator() for constants, worked out by the compiler (a fresh process that loads an index
-// would otherwise spend tens of microseconds on them, bit by bit).
-constexpr std::uint32_t zeros_constant(std::size_t bytes) {
-  std::uint32_t result = 0x80000000u;  // x^0
-  for (std::size_t k = 0; bytes > 0; bytes >>= 1, ++k)
-    if (bytes & 1u) result = multiply(result, zero_powers[k]);
-  return result;
-}
-
 #if defined(__x86_64__)
 // Bytes per stream in one round of the three-stream loop.
 constexpr std::size_t stream_bytes = 4096;
@@ -138,7 +140,7 @@ __attribute__((target("sse4.2"))) std::uint32_t update_hardware(std::uint32_t c,
   // The crc32 instruction has a latency of 3 cycles and a throughput of 1: three independent
   // streams over consecutive blocks keep it busy. update(c, A B C) =
   // shift(shift(update(c, A), |B|) ^ update(0, B), |C|) ^ update(0, C).
-  static constexpr std::uint32_t shift = zeros_constant(stream_bytes);
+  static constexpr std::uint32_t shift = x_to_the(8 * stream_bytes);  // by the compiler
   std::uint64_t c0 = c;
   for (; n >= 3 * stream_bytes; n -= 3 * stream_bytes, p += 3 * stream_bytes) {
     std::uint64_t c1 = 0, c2 = 0;
@@ -160,17 +162,6 @@ __attribute__((target("sse4.2"))) std::uint32_t update_hardware(std::uint32_t c,
   std::uint32_t r = static_cast<std::uint32_t>(c0);
   for (std::size_t i = 0; i < n % 8; ++i) r = _mm_crc32_u8(r, p[i]);
   return r;
-}
-
-// x^n mod P, reflected.
-constexpr std::uint32_t x_to_the(std::size_t n) {
-  std::uint32_t result = 0x80000000u;  // x^0
-  std::uint32_t power = 0x40000000u;   // x^1
-  for (; n > 0; n >>= 1) {
-    if (n & 1u) result = multiply(result, power);
-    power = multiply(power, power);
-  }
-  return result;
 }
 
 // Folding by carry-less multiplication (Gopal et al., "Fast CRC Computation for Generic Polynomials
