@@ -846,6 +846,27 @@ TEST_CASE("index: a full disk mid-save leaves the old file intact, and no tempor
   CHECK(files == 1);
 }
 
+TEST_CASE("index: a file of more pieces than one write takes is written whole, in order",
+          "[index]") {
+  // 1,500 sections of 1 to 97 bytes, each but a few padded to 64 bytes: some 3,000 pieces, more than
+  // the 1,024 a writev() call takes.
+  TempDir tmp;
+  const std::string path = tmp.file("many.kdx");
+  io::IndexWriter w(io::IndexKind::point_tree, io::ScalarType::float32, io::MetricId::l2, 3, 0);
+  for (std::uint32_t part = 0; part < 1500; ++part) {
+    std::vector<unsigned char> values(1 + part % 97);
+    for (std::size_t i = 0; i < values.size(); ++i) values[i] = static_cast<unsigned char>(part * 7 + i);
+    w.add_values(io::SectionType::ids, part, 1, values);
+  }
+  w.write(path);
+  CHECK(file_bytes(path) == w.bytes());
+  const auto file = io::IndexFile::open(path);  // every checksum verified
+  REQUIRE(file->info().sections.size() == 1500);
+  const io::SectionEntry* last = file->find(io::SectionType::ids, 1499);
+  REQUIRE(last);
+  CHECK(last->length == 1 + 1499 % 97);
+}
+
 TEST_CASE("index: a process killed mid-save leaves the old file intact", "[index][errors]") {
   TempDir tmp;
   const std::string path = tmp.file("tree.kdx");
