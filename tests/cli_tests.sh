@@ -542,6 +542,27 @@ if expect_ok "index --metric l1 --leaf 2" index --base base.csv --out l1.kdx --m
   python3 -c 'import json; s = json.load(open("out.txt")); assert s["load_s"] >= 0 and s["build_s"] == 0 and s["metric"] == "l1", s' \
     2>check.txt && pass "--index --stats gives load_s" || fail "--index --stats gives load_s" "$(cat check.txt)"
 fi
+# The points' checksums run beside the queries (--verify safety); verified_s says when they were done.
+if expect_ok "knn --index --threads 2 --stats" knn --index tree.kdx --query query.csv -k 5 --out ids.ivecs --threads 2 --stats; then
+  python3 -c 'import json; s = json.load(open("out.txt")); assert s["verified_s"] >= s["load_s"] > 0, s' \
+    2>check.txt && pass "--index --stats gives verified_s, after load_s" || fail "--index --stats gives verified_s, after load_s" "$(cat check.txt)"
+fi
+# A changed coordinate breaks no structure: only its checksum shows it, and no answer is written.
+python3 - <<'EOF'
+import struct
+d = bytearray(open("tree.kdx", "rb").read())
+for i in range(struct.unpack_from("<I", d, 28)[0]):
+    kind, part, _, _, offset, length = struct.unpack_from("<IIIIQQ", d, 64 + 40 * i)
+    if kind == 3:  # points
+        d[offset + length // 2] ^= 0x01
+open("bad-point.kdx", "wb").write(bytes(d))
+EOF
+rm -f ids.ivecs
+for threads in 1 2; do
+  expect_error "knn --index: a changed coordinate is a checksum error ($threads threads)" 1 "bad-point.kdx" \
+    "section 'points'" "checksum mismatch" -- knn --index bad-point.kdx --query query.csv -k 5 --out ids.ivecs --threads $threads
+done
+if [ -e ids.ivecs ]; then fail "a damaged index writes no answer" "ids.ivecs was written"; else pass "a damaged index writes no answer"; fi
 if expect_ok "index --forest" index --base base.npy --out forest.kdx --forest 3 --checks 40 --leaf 4 &&
   expect_ok "knn --index of a forest" knn --index forest.kdx --query query.csv -k 5 --out ids.ivecs --distances dist.fvecs; then
   check_results "knn --index of a forest searching all points equals brute force" knn l2 5 base.csv query.csv

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -465,6 +466,67 @@ TEST_CASE("index: a large file, checked in chunks on two threads, still catches 
   const auto loaded = io::load_point_tree<float>(path);
   require_same_nodes(loaded, tree);
   require_same_nodes(io::load_point_tree<float>(path, io::LoadMode::map, kdspace::Verify::full, 5), tree);
+}
+
+TEST_CASE("index: a load that leaves its checksums pending answers as the saved tree, and wait() names "
+          "every damaged section",
+          "[index][errors][threads]") {
+  // A tree of more than 131,072 points, so that its check runs in pieces on two threads.
+  const std::size_t n = kdspace::detail::parallel_tree_check + 3000;
+  TempDir tmp;
+  const std::string path = tmp.file("pending.kdx");
+  const PointTree<float> tree = saved_tree(path, Shape::clustered, n, 12);
+  const auto queries = kdspace_test::make_queries(
+      std::vector<float>(tree.parts().points.begin(), tree.parts().points.end()), n, 3, 40, 13);
+  auto load = [&](io::PendingChecksums& pending, unsigned threads,
+                  kdspace::Verify verify = kdspace::Verify::safety) {
+    return io::load_point_tree_deferred<float>(io::IndexFile::open(path, io::LoadMode::map, io::Checksums::deferred),
+                                               verify, threads, &pending);
+  };
+  for (unsigned threads : {0u, 1u, 2u, 3u}) {
+    CAPTURE(threads);
+    io::PendingChecksums pending;
+    const auto before = std::chrono::steady_clock::now();
+    const auto loaded = load(pending, threads);
+    CHECK(pending.started());
+    require_same_nodes(loaded, tree);
+    if (threads == 2) require_same_answers(loaded, tree, queries);
+    pending.wait();
+    CHECK(pending.done_at() >= before);
+    pending.wait();  // again: nothing more to do
+  }
+  {  // Verify::full reads every byte in its check: it takes the checksums itself, none pending
+    io::PendingChecksums pending;
+    require_same_nodes(load(pending, 2, kdspace::Verify::full), tree);
+    CHECK(!pending.started());
+  }
+
+  // One changed byte in each section, in turn: the structural check may pass (a changed coordinate
+  // breaks no structure) or fail; either way the message is the checksum's, naming the section.
+  const std::vector<unsigned char> good = file_bytes(path);
+  const auto sections = io::IndexFile::open(path)->info().sections;
+  for (const io::SectionEntry& s : sections) {
+    if (s.length == 0) continue;
+    std::vector<unsigned char> bad = good;
+    bad[s.offset + s.length / 2] ^= 0x40;
+    write_bytes(path, bad);
+    const std::string section = io::name_of(s.type);
+    CAPTURE(section);
+    for (unsigned threads : {1u, 2u}) {
+      io::PendingChecksums pending;
+      const std::string message = error_message([&] {
+        const auto loaded = load(pending, threads);
+        pending.wait();
+      });
+      CHECK(message.find("checksum mismatch: the file is damaged") != std::string::npos);
+      CHECK(message.find("section '" + section + "'") != std::string::npos);
+      if (pending.started()) CHECK(error_message([&] { pending.wait(); }) == message);  // the same, again
+    }
+  }
+  write_bytes(path, good);
+  io::PendingChecksums pending;
+  require_same_nodes(load(pending, 2), tree);
+  pending.wait();
 }
 
 TEST_CASE("index: a point order that is no permutation is named, in a tree checked on two threads",

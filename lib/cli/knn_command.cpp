@@ -176,19 +176,32 @@ NeighborLists<T> search(const Tree& tree, const io::Matrix<T>& queries, const Se
   }
 }
 
-/// How the index searched came to be: built in the run (build_s), or loaded (load_s).
+/// How the index searched came to be: built in the run (build_s), or loaded (load_s: until it answers
+/// queries). A loaded index may leave checksums `pending` (those of the points, which its check does
+/// not read), waited for before any answer is written; verified_s then says when they were all taken.
 struct Origin {
   double build_s = 0;
   double load_s = -1;  // < 0: not loaded
+  io::PendingChecksums* pending = nullptr;
+  Clock::time_point load_start{};
+  double verified_s = -1;  // < 0: nothing was pending
+
+  // Throws the pending checksums' Error, if any: then no answer is written.
+  void wait_for_checksums() {
+    if (!pending || !pending->started()) return;
+    pending->wait();
+    verified_s = std::chrono::duration<double>(pending->done_at() - load_start).count();
+  }
   void add_to(JsonObject& json) const {
     json.add("build_s", build_s);
     if (load_s >= 0) json.add("load_s", load_s);
+    if (verified_s >= 0) json.add("verified_s", verified_s);
   }
 };
 
 // Searches a built or loaded tree, writes the results, prints --stats.
 template <class T, class Metric, class Tree>
-int search_tree(const SearchJob& job, const Tree& tree, const io::Matrix<T>& queries, const Origin& origin) {
+int search_tree(const SearchJob& job, const Tree& tree, const io::Matrix<T>& queries, Origin origin) {
   QueryStats stats;
   Progress search_progress("searching", Progress::Kind::elapsed);
   const Clock::time_point start = Clock::now();
@@ -196,6 +209,7 @@ int search_tree(const SearchJob& job, const Tree& tree, const io::Matrix<T>& que
   const double query_s = seconds_since(start);
   search_progress.finish();
 
+  origin.wait_for_checksums();
   write_results(found, job);
 
   if (job.stats) {
@@ -421,18 +435,21 @@ int search_tree_index(const SearchJob& job, const std::shared_ptr<const io::Inde
   if (job.checks > 0 || job.ef > 0)
     throw UsageError(std::string(job.checks > 0 ? "--checks" : "--ef") + " applies to forests; " + job.index +
                      " holds a point tree");
+  io::PendingChecksums pending;
   auto load_and_search = [&](auto load) {
     Progress progress("loading " + job.index, load_progress(*file));
     const auto tree = load();
     Origin origin;
     origin.load_s = seconds_since(start);
+    origin.pending = &pending;
+    origin.load_start = start;
     progress.finish();
     const io::Matrix<T> queries = read_queries_for_index<T>(job, tree.dim(), tree.size());
     return search_tree<T, Metric>(job, tree, queries, origin);
   };
   if (file->info().kind == io::IndexKind::point_tree)
     return load_and_search(
-        [&] { return io::load_point_tree_deferred<T, Dynamic, Metric>(file, job.verify, job.threads); });
+        [&] { return io::load_point_tree_deferred<T, Dynamic, Metric>(file, job.verify, job.threads, &pending); });
   return load_and_search([&] {
     return io::load_with_checksums(
         file, [](const auto& f) { return io::load_dynamic_point_tree<T, Dynamic, Metric>(f); });

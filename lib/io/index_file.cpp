@@ -18,6 +18,7 @@
 #include <limits>
 #include <new>
 #include <string>
+#include <stdexcept>
 #include <system_error>
 
 #include "crc32c.hpp"
@@ -427,10 +428,12 @@ IndexFile::ChecksumPass::ChecksumPass(const IndexFile& file, std::vector<const S
   for (std::size_t k = 0; k < streamed_.size(); ++k) pieces(k, {0});
 }
 
-void IndexFile::ChecksumPass::run() {
-  for (std::size_t c = next_++; c < chunks_.size(); c = next_++)
+std::size_t IndexFile::ChecksumPass::run() {
+  std::size_t taken = 0;
+  for (std::size_t c = next_++; c < chunks_.size(); c = next_++, ++taken)
     crcs_[c] =
         io::detail::crc32c(file_.bytes_ + chunks_[c].offset, static_cast<std::size_t>(chunks_[c].length));
+  return taken;
 }
 
 void IndexFile::ChecksumPass::pieces(std::size_t k, const std::vector<std::uint64_t>& starts) {
@@ -501,6 +504,45 @@ std::vector<const SectionEntry*> SectionChecksums::sections_of(const std::vector
 
 SectionChecksums::SectionChecksums(const IndexFile& file, const std::vector<Reader>& readers)
     : readers_(readers), pass_(file, sections_of(readers)) {}
+
+// ---- checksums pending after a load ----------------------------------------------------------------------
+
+PendingChecksums::~PendingChecksums() {
+  if (thread_) thread_->join();
+}
+
+void PendingChecksums::start(const std::shared_ptr<const IndexFile>& file, bool own_thread) {
+  if (pass_) throw std::logic_error("PendingChecksums::start called twice");
+  file_ = file;
+  pass_ = std::make_unique<IndexFile::ChecksumPass>(*file);
+  if (!own_thread) return;
+  try {
+    thread_ = std::make_unique<kdspace::detail::SectionThread>([this] {
+      pass_->run();
+      thread_done_at_ = std::chrono::steady_clock::now();
+    });
+  } catch (const std::system_error&) {
+    // No thread to be had: wait() takes them all.
+  }
+}
+
+void PendingChecksums::wait() {
+  if (!pass_ || waited_) {
+    if (error_) std::rethrow_exception(error_);
+    return;
+  }
+  waited_ = true;
+  const bool helped = pass_->run() > 0;  // a share of what the thread has not taken yet
+  const auto helped_until = std::chrono::steady_clock::now();
+  if (thread_) thread_->finish();
+  done_at_ = !thread_ ? helped_until : helped ? std::max(helped_until, thread_done_at_) : thread_done_at_;
+  try {
+    pass_->finish();  // the judgement (every chunk is taken)
+  } catch (...) {
+    error_ = std::current_exception();
+  }
+  if (error_) std::rethrow_exception(error_);
+}
 
 void SectionChecksums::pieces(std::size_t array, const std::vector<std::size_t>& starts) {
   for (std::size_t k = 0; k < readers_.size(); ++k)

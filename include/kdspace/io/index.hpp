@@ -15,6 +15,7 @@
 // mapping keeps the old one). Every problem throws kdspace::Error("PATH: what is wrong").
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <exception>
@@ -245,9 +246,32 @@ PointTree<T, Dim, Metric> load_point_tree(const std::shared_ptr<const IndexFile>
 /// more (kdspace::detail::parallel_tree_check), which take its subtrees in turn, each checksumming the
 /// bytes it reads; 0 on as many as pay for their start (kdspace::detail::check_threads_that_pay: 4 for
 /// the 18 MB of 1e6 3-D float points, never more than the hardware has).
+///
+/// With `pending` and Verify::safety, the load leaves the checksums to `pending` (PendingChecksums:
+/// wait() before an answer is used) and returns once the tree is safe to query. The check runs without
+/// them, reading the nodes and the order alone (a third of 3-D float points' file); then they start
+/// on a thread of their own (where `threads` is 2 or more, or 0 and two pay for their start).
 template <class T, int Dim = Dynamic, class Metric = L2>
 PointTree<T, Dim, Metric> load_point_tree_deferred(const std::shared_ptr<const IndexFile>& file,
-                                                   Verify verify = Verify::safety, unsigned threads = 2) {
+                                                   Verify verify = Verify::safety, unsigned threads = 2,
+                                                   PendingChecksums* pending = nullptr) {
+  if (pending && verify == Verify::safety) {
+    const unsigned all = threads != 0 ? threads
+                                      : kdspace::detail::check_threads_that_pay(
+                                            static_cast<std::size_t>(file->info().file_bytes),
+                                            kdspace::detail::resolve_threads(0));
+    PointTree<T, Dim, Metric> tree = [&] {
+      try {
+        return detail::point_tree_of<T, Dim, Metric>(file, nullptr, verify, threads);
+      } catch (const Error&) {
+        pending->start(file, false);
+        pending->wait();  // a damaged section explains the problem: its message wins
+        throw;
+      }
+    }();
+    pending->start(file, all >= 2);
+    return tree;
+  }
   return detail::load_beside_checksums(
       *file, detail::point_tree_readers(*file, static_cast<std::size_t>(file->info().dim) * sizeof(T)),
       [&](kdspace::detail::CheckCompanion* checksums) {

@@ -57,13 +57,16 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <exception>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "kdspace/detail/check_companion.hpp"
+#include "kdspace/detail/section_thread.hpp"
 #include "kdspace/detail/storage.hpp"
 
 namespace kdspace::io {
@@ -200,7 +203,8 @@ class IndexFile {
   class ChecksumPass {
    public:
     explicit ChecksumPass(const IndexFile& file, std::vector<const SectionEntry*> streamed = {});
-    void run();
+    /// Returns how many chunks this call took.
+    std::size_t run();
     /// Streamed section k in pieces: piece p is bytes [starts[p], starts[p + 1]), the last one up to
     /// the section's end (the first begins at 0 whatever starts[0]; starts are clamped to ascend
     /// within the section). Until then a section is one piece.
@@ -275,6 +279,40 @@ class SectionChecksums final : public kdspace::detail::CheckCompanion {
   static std::vector<const SectionEntry*> sections_of(const std::vector<Reader>& readers);
   std::vector<Reader> readers_;
   IndexFile::ChecksumPass pass_;
+};
+
+/// The checksums of a file, left running when the load of an index from it returns: taken on a
+/// thread of their own from before the index's structural check starts, so that the index answers
+/// queries while they run. Its check (Verify::safety) keeps every query inside the index's arrays
+/// whatever the file's bytes, so such an index answers safely, but not yet surely: a damaged byte of a
+/// point, say, shows only in its section's checksum. So wait() before an answer is used; the kdspace
+/// command writes none before. (load_point_tree_deferred takes one.)
+class PendingChecksums {
+ public:
+  PendingChecksums() = default;
+  PendingChecksums(const PendingChecksums&) = delete;
+  PendingChecksums& operator=(const PendingChecksums&) = delete;
+  /// Waits for the thread, if one runs; judges nothing.
+  ~PendingChecksums();
+
+  /// Starts taking every section's checksum of `file` (opened with Checksums::deferred): on a thread
+  /// of its own when `own_thread` (if one can be had), else all in wait(). Once only.
+  void start(const std::shared_ptr<const IndexFile>& file, bool own_thread);
+  bool started() const { return pass_ != nullptr; }
+  /// Waits until the checksums are all taken (taking a share of what is left itself), then throws
+  /// Error("PATH: section ...: checksum mismatch: the file is damaged") for the first damaged section,
+  /// again on every later call. Returns at once when nothing was started.
+  void wait();
+  /// When the last checksum was taken (after wait(); the epoch when nothing was started).
+  std::chrono::steady_clock::time_point done_at() const { return done_at_; }
+
+ private:
+  std::shared_ptr<const IndexFile> file_;
+  std::unique_ptr<IndexFile::ChecksumPass> pass_;
+  std::unique_ptr<kdspace::detail::SectionThread> thread_;
+  std::chrono::steady_clock::time_point done_at_{}, thread_done_at_{};
+  std::exception_ptr error_;
+  bool waited_ = false;
 };
 
 /// Collects the sections of one index and writes them as one file, atomically.
