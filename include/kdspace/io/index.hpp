@@ -13,6 +13,15 @@
 // structure), not a copy, and the index keeps the mapping alive. The file must not be changed in
 // place while mapped; saving over it is safe (save() writes a new file and renames it, so the
 // mapping keeps the old one). Every problem throws kdspace::Error("PATH: what is wrong").
+//
+// To answer before every checksum is verified (what `kdspace knn --index` does), ask for it:
+//
+//   kdspace::io::PendingChecksums pending;
+//   auto tree = kdspace::io::load_point_tree_deferred<float>(
+//       kdspace::io::IndexFile::open(path, kdspace::io::LoadMode::map, kdspace::io::Checksums::deferred),
+//       kdspace::Verify::safety, 2, &pending);   // returns once the structure is checked
+//   ... queries (safe whatever the bytes) ...
+//   pending.wait();                              // throws if a section is damaged: then drop them
 #pragma once
 
 #include <algorithm>
