@@ -177,8 +177,8 @@ NeighborLists<T> search(const Tree& tree, const io::Matrix<T>& queries, const Se
 }
 
 /// How the index searched came to be: built in the run (build_s), or loaded (load_s: until it answers
-/// queries). A loaded index may leave checksums `pending` (those of the points, which its check does
-/// not read), waited for before any answer is written; verified_s then says when they were all taken.
+/// queries). A loaded index may leave the file's checksums `pending`, waited for before any answer is
+/// written; verified_s then says when they were all verified.
 struct Origin {
   double build_s = 0;
   double load_s = -1;  // < 0: not loaded

@@ -86,7 +86,7 @@ const char* const stats_usage =
 const char* const index_stats_usage =
     R"(                       with --index, load_s (mapping and checking the index, until it answers)
                        and build_s 0; for a point tree under --verify safety, verified_s too:
-                       when the points' checksums, taken beside the queries, were all verified
+                       when the file's checksums, taken beside the queries, were all verified
                        (no answer is written before)
 )";
 

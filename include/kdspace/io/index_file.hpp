@@ -282,8 +282,8 @@ class SectionChecksums final : public kdspace::detail::CheckCompanion {
 };
 
 /// The checksums of a file, left running when the load of an index from it returns: taken on a
-/// thread of their own from before the index's structural check starts, so that the index answers
-/// queries while they run. Its check (Verify::safety) keeps every query inside the index's arrays
+/// thread of their own once the index's structural check is done, so that the index answers queries
+/// while they run. Its check (Verify::safety) keeps every query inside the index's arrays
 /// whatever the file's bytes, so such an index answers safely, but not yet surely: a damaged byte of a
 /// point, say, shows only in its section's checksum. So wait() before an answer is used; the kdspace
 /// command writes none before. (load_point_tree_deferred takes one.)
