@@ -23,6 +23,7 @@
 
 #include "crc32c.hpp"
 #include "kdspace/detail/huge_pages.hpp"
+#include "kdspace/detail/section_thread.hpp"
 #include "kdspace/error.hpp"
 
 #if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__

@@ -265,10 +265,8 @@ PointTree<T, Dim, Metric> load_point_tree_deferred(const std::shared_ptr<const I
                                                    Verify verify = Verify::safety, unsigned threads = 2,
                                                    PendingChecksums* pending = nullptr) {
   if (pending && verify == Verify::safety) {
-    const unsigned all = threads != 0 ? threads
-                                      : kdspace::detail::check_threads_that_pay(
-                                            static_cast<std::size_t>(file->info().file_bytes),
-                                            kdspace::detail::resolve_threads(0));
+    const unsigned all =
+        kdspace::detail::check_threads_for(threads, static_cast<std::size_t>(file->info().file_bytes));
     PointTree<T, Dim, Metric> tree = [&] {
       try {
         return detail::point_tree_of<T, Dim, Metric>(file, nullptr, verify, threads);

@@ -66,8 +66,11 @@
 #include <vector>
 
 #include "kdspace/detail/check_companion.hpp"
-#include "kdspace/detail/section_thread.hpp"
 #include "kdspace/detail/storage.hpp"
+
+namespace kdspace::detail {
+class SectionThread;  // detail/section_thread.hpp: PendingChecksums' thread, in index_file.cpp alone
+}
 
 namespace kdspace::io {
 

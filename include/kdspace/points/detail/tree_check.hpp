@@ -93,6 +93,12 @@ inline unsigned check_threads_that_pay(std::size_t bytes, unsigned hardware) {
   return std::clamp(pay, 1u, std::max(hardware, 1u));
 }
 
+/// The threads a check of `bytes` runs on when `asked` for that many: 0 leaves the choice to
+/// check_threads_that_pay, on this machine's hardware threads.
+inline unsigned check_threads_for(unsigned asked, std::size_t bytes) {
+  return asked != 0 ? asked : check_threads_that_pay(bytes, resolve_threads(0));
+}
+
 /// The parallel check hands out subtrees of at most 1/(tree_check_pieces_a_thread * threads) of the
 /// nodes: enough that threads which start late (a thread's start costs tens of microseconds, a
 /// sleeping processor's wake more) still find some of the tree to share, and that all finish together.
@@ -107,11 +113,8 @@ class TreeChecker {
         dim_(p.dim),
         full_(p.verify == Verify::full),
         kernels_(p.wide_kernels && tree_check_kernels()),
-        threads_(p.check_threads != 0
-                     ? p.check_threads
-                     : check_threads_that_pay(p.points.size() * sizeof(T) + n_ * sizeof(std::uint32_t) +
-                                                  p.nodes.size() * sizeof(PointNode<T>),
-                                              resolve_threads(0))) {}
+        threads_(check_threads_for(p.check_threads, p.points.size() * sizeof(T) + n_ * sizeof(std::uint32_t) +
+                                                        p.nodes.size() * sizeof(PointNode<T>))) {}
 
   TreeShape run() {
     if (dim_ == 0) fail("dimension 0");
