@@ -357,15 +357,17 @@ Timed in_fresh_process(ChildWork work, unsigned threads, std::size_t n, const st
   return t;
 }
 
+// The median of one figure of the runs.
+double median_of(const std::vector<Timed>& v, double Timed::*figure) {
+  std::vector<double> x;
+  for (const Timed& t : v) x.push_back(t.*figure);
+  return median(x);
+}
 double seconds(const std::vector<Timed>& v) {
-  std::vector<double> s;
-  for (const Timed& t : v) s.push_back(t.seconds);
-  return median(s);
+  return median_of(v, &Timed::seconds);
 }
 double faults(const std::vector<Timed>& v) {
-  std::vector<double> f;
-  for (const Timed& t : v) f.push_back(t.faults);
-  return median(f);
+  return median_of(v, &Timed::faults);
 }
 
 // Drops `path` (written and synced, mapped nowhere) from the page cache; returns the fraction of its
@@ -471,19 +473,18 @@ void point_tree_threads(std::size_t n, int reps, const std::string& dir) {
   for (std::size_t i = 0; i < rows; ++i) {
     const unsigned t = thread_counts[i];
     const double build = seconds(fresh_build[i]), load = seconds(fresh_load[i]), ready = seconds(fresh_pending[i]);
-    std::vector<double> verified;
-    for (const Timed& p : fresh_pending[i]) verified.push_back(p.verified);
+    const double verified = median_of(fresh_pending[i], &Timed::verified);
     std::printf("| %u | %.4f | %.0f | %.4f | %.0f | %.3f | %.0f | %.3f | %.2f%% | %.2f%% | %.3f | %.3f | %.2f%% |\n",
                 t, build, faults(fresh_build[i]), seconds(again_build[i]), faults(again_build[i]), 1e3 * load,
                 faults(fresh_load[i]), 1e3 * seconds(again_load[i]), 100 * load / build,
-                100 * load / seconds(fresh_build[0]), 1e3 * ready, 1e3 * median(verified), 100 * ready / build);
+                100 * load / seconds(fresh_build[0]), 1e3 * ready, 1e3 * verified, 100 * ready / build);
     json("\"part\": \"load_threads\", \"index\": \"PointTree, uniform 3-D float\", \"threads\": " +
          std::to_string(t) + ", \"build_fresh_s\": " + num(build) + ", \"build_fresh_faults\": " +
          num(faults(fresh_build[i])) + ", \"build_again_s\": " + num(seconds(again_build[i])) +
          ", \"build_again_faults\": " + num(faults(again_build[i])) + ", \"load_map_fresh_s\": " + num(load) +
          ", \"load_map_fresh_faults\": " + num(faults(fresh_load[i])) +
          ", \"load_map_again_s\": " + num(seconds(again_load[i])) + ", \"load_pending_fresh_s\": " + num(ready) +
-         ", \"load_pending_verified_s\": " + num(median(verified)));
+         ", \"load_pending_verified_s\": " + num(verified));
   }
   after_eviction(path, reps);
 }
